@@ -1,0 +1,66 @@
+"""mapapi: a decentralized, git-like map repository for robot swarms.
+
+The public API: `Peer` (async facade), `Transaction`, value types and errors.
+`mapapi.sync` wraps `Peer` for blocking scripts.
+"""
+
+from mapapi.errors import (
+    AlreadyInitialisedError,
+    ChunkError,
+    ChunkNotFound,
+    ConflictError,
+    CorruptRepoError,
+    ItemNotFound,
+    LockError,
+    LockTimeout,
+    MapError,
+    NetworkError,
+    NotARepoError,
+    NotParticipatingError,
+    RepoError,
+    TransactionError,
+    UnresolvedConflicts,
+    UsageError,
+    ViewClosedError,
+)
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.peer import Peer
+from mapapi.repo import Repository
+from mapapi.store import ChunkInfo
+from mapapi.table import TableDescriptor
+from mapapi.transaction import Change, Conflict, Op, Transaction
+
+__all__ = [
+    "AlreadyInitialisedError",
+    "Change",
+    "ChunkError",
+    "ChunkId",
+    "ChunkInfo",
+    "ChunkNotFound",
+    "CommitId",
+    "CommitRecord",
+    "Conflict",
+    "ConflictError",
+    "CorruptRepoError",
+    "ItemId",
+    "ItemNotFound",
+    "LockError",
+    "LockTimeout",
+    "MapError",
+    "NetworkError",
+    "NotARepoError",
+    "NotParticipatingError",
+    "Op",
+    "Peer",
+    "PeerId",
+    "RepoError",
+    "Repository",
+    "Revision",
+    "TableDescriptor",
+    "Transaction",
+    "TransactionError",
+    "UnresolvedConflicts",
+    "UsageError",
+    "ViewClosedError",
+]

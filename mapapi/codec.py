@@ -1,0 +1,119 @@
+"""The only module that sees generated protobuf code (`mapapi/_pb`).
+
+It converts between the core's dataclasses and the messages of
+`proto/mapapi/v1/*.proto`, for storage (persisted views) and the wire.
+"""
+
+from __future__ import annotations
+
+from google.protobuf.message import DecodeError
+
+from mapapi._pb.mapapi.v1 import core_pb2, types_pb2
+from mapapi.errors import CorruptRepoError
+from mapapi.history import Revision
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.transaction import Change, Conflict, Op
+
+_GENERATED = (core_pb2, types_pb2)
+
+
+def ensure_registered() -> None:
+    """Make sure the mapapi.v1 message types are in the default descriptor pool.
+
+    Importing this module does it; the function exists so callers can say why
+    they import it.
+    """
+
+
+def revision_to_pb(r: Revision) -> core_pb2.Revision:
+    """A revision as its protobuf message."""
+    return core_pb2.Revision(
+        item_id=r.item_id.to_bytes(),
+        table=r.table,
+        chunk_id=r.chunk_id.to_bytes(),
+        data=r.data,
+        insert_time=r.insert_time,
+        update_time=r.update_time,
+        removed=r.removed,
+        author=r.author.to_bytes(),
+        commit_id=r.commit_id.to_bytes(),
+    )
+
+
+def revision_from_pb(m: core_pb2.Revision) -> Revision:
+    """A revision from its protobuf message (raises ValueError on bad ids)."""
+    return Revision(
+        ItemId.from_bytes(m.item_id),
+        m.table,
+        ChunkId.from_bytes(m.chunk_id),
+        m.data,
+        m.insert_time,
+        m.update_time,
+        m.removed,
+        PeerId.from_bytes(m.author),
+        CommitId.from_bytes(m.commit_id),
+    )
+
+
+def change_to_pb(c: Change) -> core_pb2.Change:
+    """A buffered change as its protobuf message."""
+    return core_pb2.Change(
+        op=c.op.value,
+        table=c.table,
+        item_id=c.item_id.to_bytes(),
+        chunk_id=c.chunk_id.to_bytes(),
+        data=c.data,
+    )
+
+
+def change_from_pb(m: core_pb2.Change) -> Change:
+    """A buffered change from its protobuf message."""
+    return Change(
+        Op(m.op),
+        m.table,
+        ItemId.from_bytes(m.item_id),
+        ChunkId.from_bytes(m.chunk_id),
+        m.data,
+    )
+
+
+def encode_view(
+    name: str, begin_time: int, isolation: str, changes: list[Change], conflicts: list[Conflict]
+) -> bytes:
+    """Serialize a CLI view (a transaction kept between commands)."""
+    view = core_pb2.ViewState(name=name, begin_time=begin_time, isolation=isolation)
+    view.changes.extend(change_to_pb(c) for c in changes)
+    for c in conflicts:
+        entry = view.conflicts.add(table=c.table, item_id=c.item_id.to_bytes())
+        entry.theirs.CopyFrom(revision_to_pb(c.theirs))
+        if c.base is not None:
+            entry.base.CopyFrom(revision_to_pb(c.base))
+        if c.ours is not None:
+            entry.ours.CopyFrom(change_to_pb(c.ours))
+    return bytes(view.SerializeToString())
+
+
+def decode_view(blob: bytes) -> tuple[str, int, str, list[Change], list[Conflict]]:
+    """The fields of a serialized view: name, begin time, isolation, changes, conflicts.
+
+    Raises:
+        CorruptRepoError: the stored view does not parse.
+    """
+    view = core_pb2.ViewState()
+    try:
+        view.ParseFromString(blob)
+        changes = [change_from_pb(c) for c in view.changes]
+        conflicts = [
+            Conflict(
+                c.table,
+                ItemId.from_bytes(c.item_id),
+                ChunkId.from_bytes(c.theirs.chunk_id),
+                revision_from_pb(c.base) if c.HasField("base") else None,
+                change_from_pb(c.ours) if c.HasField("ours") else None,
+                revision_from_pb(c.theirs),
+            )
+            for c in view.conflicts
+        ]
+    except (DecodeError, ValueError) as exc:
+        raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc
+    return view.name, view.begin_time, view.isolation, changes, conflicts

@@ -1,0 +1,146 @@
+"""The exception hierarchy (STYLE §4).
+
+Every error mapapi raises on purpose is a `MapError`. `retriable` tells retry
+loops whether the same call may succeed later; `code` travels in error replies
+and picks the CLI's exit status through `exit_code`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar
+
+if TYPE_CHECKING:
+    from mapapi.transaction import Conflict, Transaction
+
+
+class MapError(Exception):
+    """Base for every error mapapi raises on purpose."""
+
+    retriable: ClassVar[bool] = False
+    code: ClassVar[int] = 1
+    exit_code: ClassVar[int] = 1
+
+
+class UsageError(MapError, ValueError):
+    """The caller asked for something malformed (bad JSON, unknown table, ...)."""
+
+    code = 2
+    exit_code = 2
+
+
+class RepoError(MapError):
+    """A problem with the on-disk repository."""
+
+    code = 10
+
+
+class NotARepoError(RepoError):
+    """No `.mapapi` folder here or in any parent."""
+
+    code = 11
+    exit_code = 4
+
+
+class AlreadyInitialisedError(RepoError):
+    """`init` on a folder that already holds a repository."""
+
+    code = 12
+
+
+class CorruptRepoError(RepoError):
+    """The repository's files are damaged or are not a mapapi repository."""
+
+    code = 13
+
+
+class ChunkError(MapError):
+    """A problem with a chunk."""
+
+    code = 15
+
+
+class ChunkNotFound(ChunkError):
+    """No chunk with that id is known here."""
+
+    code = 16
+
+
+class ItemNotFound(MapError):
+    """No item with that id exists at the time read."""
+
+    code = 17
+
+
+class NotParticipatingError(ChunkError):
+    """This peer does not hold the chunk."""
+
+    code = 18
+
+
+class TransactionError(MapError):
+    """A problem with a transaction or view."""
+
+    code = 20
+
+
+class ConflictError(TransactionError):
+    """The commit lost a race: items it changed were changed by someone else.
+
+    Attributes:
+        conflicts: one `Conflict` (base, ours, theirs) per conflicting item.
+        resolved_at: the time the conflicts were seen; `merge()` begins there.
+    """
+
+    retriable = True
+    code = 21
+    exit_code = 3
+
+    def __init__(
+        self, conflicts: list[Conflict], transaction: Transaction, resolved_at: int
+    ) -> None:
+        self.conflicts = conflicts
+        self.resolved_at = resolved_at
+        self._transaction = transaction
+        super().__init__(
+            f"{len(conflicts)} conflicting item(s); run `mapctl diff` and "
+            "`mapctl resolve`, then commit again"
+        )
+
+    def merge(self) -> Transaction:
+        """A new transaction, begun when the conflicts were seen, holding every
+        change of the failed one that did not conflict (git-like)."""
+        return self._transaction.merged(self)
+
+
+class ViewClosedError(TransactionError):
+    """The transaction or view is not in a state that allows this."""
+
+    code = 22
+
+
+class UnresolvedConflicts(TransactionError):
+    """A view still holds conflicts, so it cannot commit."""
+
+    code = 23
+    exit_code = 3
+
+
+class LockError(MapError):
+    """A problem with a chunk lock."""
+
+    code = 30
+
+
+class LockTimeout(LockError):
+    """A lock was not granted in time."""
+
+    retriable = True
+    code = 31
+
+
+class NetworkError(MapError):
+    """A message could not be delivered or answered."""
+
+    retriable = True
+    code = 40
+    exit_code = 5

@@ -1,0 +1,110 @@
+"""The `Store` protocol: what the core needs from persistence."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import ChunkId, CommitId, ItemId
+
+IdKind = Literal["item", "chunk", "commit"]
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkInfo:
+    """A chunk known locally: its id, its table and how many live items it holds now."""
+
+    id: ChunkId
+    table: str
+    items: int
+
+
+class Store(Protocol):
+    """Tables, chunks, full item history, commit records and persisted views.
+
+    All reads of revisions take a logical time; writes of revisions happen only
+    through `apply_commit`, which is atomic (all of the commit or none of it).
+    """
+
+    def close(self) -> None:
+        """Release files and connections."""
+
+    def clock(self) -> int:
+        """The highest commit time applied so far (0 when empty)."""
+
+    def exclusive(self) -> AbstractContextManager[None]:
+        """Serialise committers: while held, no other writer (thread or process)
+        can apply a commit, so validation and `apply_commit` are atomic together."""
+
+    # tables and chunks
+    def add_table(self, name: str, type_name: str) -> None:
+        """Register a table; raises UsageError if the name is taken."""
+
+    def tables(self) -> dict[str, str]:
+        """Table name -> full protobuf type name."""
+
+    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
+        """Register a chunk of `table` (which must exist)."""
+
+    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
+        """The chunks held here, optionally of one table."""
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        """The table of a chunk; raises ChunkNotFound."""
+
+    # revisions
+    def read(self, item_id: ItemId, time: int) -> Revision | None:
+        """The newest revision at or before `time`, tombstones included."""
+
+    def history(self, item_id: ItemId) -> list[Revision]:
+        """Every revision of an item, oldest first."""
+
+    def scan(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """The items visible at `time` (not removed), in a table or chunk."""
+
+    def latest(self, item_ids: Sequence[ItemId]) -> dict[ItemId, Revision]:
+        """The newest revision of each existing item among `item_ids`."""
+
+    def changed_since(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """Revisions written after `time`, in a table or chunk, oldest first."""
+
+    # commits
+    def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
+        """Write a commit's revisions and record atomically; advances `clock()`."""
+
+    def commits(self, limit: int | None = None) -> list[CommitRecord]:
+        """Commit records, newest first."""
+
+    def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
+        """One commit record, or None."""
+
+    def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
+        """The revisions one commit wrote."""
+
+    def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
+        """Ids of `kind` starting with `prefix` (at most 2: enough to see ambiguity)."""
+
+    # persisted CLI views
+    def load_view(self, name: str) -> bytes | None:
+        """The serialized view `name`, or None."""
+
+    def save_view(self, name: str, blob: bytes) -> None:
+        """Create or replace a view."""
+
+    def delete_view(self, name: str) -> None:
+        """Forget a view (no error if absent)."""
+
+    def views(self) -> dict[str, bytes]:
+        """Every view by name."""
+
+
+def newest_first(records: Iterator[CommitRecord] | list[CommitRecord]) -> list[CommitRecord]:
+    """Commit records sorted newest first (ties by id, for a stable order)."""
+    return sorted(records, key=lambda c: (c.time, c.id), reverse=True)

@@ -1,0 +1,173 @@
+"""An in-memory `Store` for unit tests and scratch peers."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+
+from mapapi.errors import ChunkNotFound, UsageError
+from mapapi.history import CommitRecord, ItemHistory, Revision, revision_at
+from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.store.base import ChunkInfo, IdKind, newest_first
+
+
+class MemoryStore:
+    """Keeps everything in dicts; a re-entrant lock makes commits atomic."""
+
+    def __init__(self) -> None:
+        self._lock = threading.RLock()
+        self._clock = 0
+        self._tables: dict[str, str] = {}
+        self._chunks: dict[ChunkId, str] = {}
+        self._items: dict[ItemId, ItemHistory] = {}
+        self._commits: dict[CommitId, tuple[CommitRecord, list[Revision]]] = {}
+        self._views: dict[str, bytes] = {}
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    def clock(self) -> int:
+        """The highest applied commit time."""
+        return self._clock
+
+    @contextmanager
+    def exclusive(self) -> Iterator[None]:
+        """Hold the store's lock."""
+        with self._lock:
+            yield
+
+    def add_table(self, name: str, type_name: str) -> None:
+        """Register a table."""
+        with self._lock:
+            if name in self._tables:
+                raise UsageError(f"table {name!r} already exists")
+            self._tables[name] = type_name
+
+    def tables(self) -> dict[str, str]:
+        """Table name -> type name."""
+        return dict(self._tables)
+
+    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
+        """Register a chunk."""
+        with self._lock:
+            if table not in self._tables:
+                raise UsageError(f"no table {table!r}")
+            self._chunks.setdefault(chunk_id, table)
+
+    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
+        """The chunks, with their live item counts now."""
+        counts: dict[ChunkId, int] = dict.fromkeys(self._chunks, 0)
+        for history in self._items.values():
+            latest = history.latest()
+            if latest is not None and not latest.removed:
+                counts[latest.chunk_id] += 1
+        return [
+            ChunkInfo(cid, t, counts[cid])
+            for cid, t in sorted(self._chunks.items())
+            if table is None or t == table
+        ]
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        """The table of a chunk."""
+        try:
+            return self._chunks[chunk_id]
+        except KeyError:
+            raise ChunkNotFound(f"no chunk {chunk_id} here") from None
+
+    def read(self, item_id: ItemId, time: int) -> Revision | None:
+        """Newest revision at or before `time`."""
+        history = self._items.get(item_id)
+        if history is None:
+            return None
+        return revision_at(history.revisions, time)
+
+    def history(self, item_id: ItemId) -> list[Revision]:
+        """All revisions of an item."""
+        history = self._items.get(item_id)
+        return list(history.revisions) if history else []
+
+    def _in_scope(self, r: Revision, table: str | None, chunk: ChunkId | None) -> bool:
+        return (table is None or r.table == table) and (chunk is None or r.chunk_id == chunk)
+
+    def scan(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """Items visible at `time`."""
+        with self._lock:
+            found = [h.at(time) for h in self._items.values()]
+        return sorted(
+            (r for r in found if r is not None and self._in_scope(r, table, chunk)),
+            key=lambda r: r.item_id,
+        )
+
+    def latest(self, item_ids: Sequence[ItemId]) -> dict[ItemId, Revision]:
+        """Newest revision per item."""
+        out = {}
+        for item_id in item_ids:
+            history = self._items.get(item_id)
+            latest = history.latest() if history else None
+            if latest is not None:
+                out[item_id] = latest
+        return out
+
+    def changed_since(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """Revisions written after `time`."""
+        with self._lock:
+            found = [r for h in self._items.values() for r in h.revisions if r.update_time > time]
+        return sorted(
+            (r for r in found if self._in_scope(r, table, chunk)),
+            key=lambda r: (r.update_time, r.item_id),
+        )
+
+    def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
+        """Apply atomically under the lock."""
+        with self._lock:
+            if record.id in self._commits:
+                return
+            for revision in revisions:
+                self._items.setdefault(revision.item_id, ItemHistory()).add(revision)
+            self._commits[record.id] = (record, list(revisions))
+            self._clock = max(self._clock, record.time)
+
+    def commits(self, limit: int | None = None) -> list[CommitRecord]:
+        """Newest first."""
+        records = newest_first([c for c, _ in self._commits.values()])
+        return records[:limit] if limit is not None else records
+
+    def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
+        """One record."""
+        entry = self._commits.get(commit_id)
+        return entry[0] if entry else None
+
+    def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
+        """What one commit wrote."""
+        entry = self._commits.get(commit_id)
+        return list(entry[1]) if entry else []
+
+    def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
+        """Ids starting with `prefix`."""
+        pool: dict[str, object] = {
+            "item": self._items,
+            "chunk": self._chunks,
+            "commit": self._commits,
+        }[kind]  # type: ignore[assignment]
+        return sorted(i for i in pool if i.startswith(prefix))[:2]
+
+    def load_view(self, name: str) -> bytes | None:
+        """A view."""
+        return self._views.get(name)
+
+    def save_view(self, name: str, blob: bytes) -> None:
+        """Store a view."""
+        self._views[name] = blob
+
+    def delete_view(self, name: str) -> None:
+        """Drop a view."""
+        self._views.pop(name, None)
+
+    def views(self) -> dict[str, bytes]:
+        """All views."""
+        return dict(self._views)

@@ -1,0 +1,394 @@
+"""The default `Store`: one SQLite file in WAL mode, one SQL transaction per commit.
+
+Several threads and several processes may open the same file. Each thread
+gets its own connection; committers serialise on SQLite's write lock
+(`BEGIN IMMEDIATE`), which makes validation plus apply atomic across processes.
+WAL with `synchronous=NORMAL` survives a killed process with every acknowledged
+commit intact; only an OS crash or power loss may drop the last few commits.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+from mapapi.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageError
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.store.base import ChunkInfo, IdKind
+
+FORMAT = "mapapi-store"
+SCHEMA_VERSION = 1
+BUSY_TIMEOUT_MS = 30_000
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS tables (name TEXT PRIMARY KEY, type_name TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS chunks (
+    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name));
+CREATE TABLE IF NOT EXISTS revisions (
+    item_id TEXT NOT NULL, update_time INTEGER NOT NULL, table_name TEXT NOT NULL,
+    chunk_id TEXT NOT NULL, data BLOB NOT NULL, insert_time INTEGER NOT NULL,
+    removed INTEGER NOT NULL, author TEXT NOT NULL, commit_id TEXT NOT NULL,
+    PRIMARY KEY (item_id, update_time)) WITHOUT ROWID;
+CREATE INDEX IF NOT EXISTS revisions_chunk ON revisions (chunk_id, item_id);
+CREATE INDEX IF NOT EXISTS revisions_table ON revisions (table_name, item_id);
+CREATE INDEX IF NOT EXISTS revisions_commit ON revisions (commit_id);
+CREATE INDEX IF NOT EXISTS revisions_time ON revisions (update_time);
+CREATE TABLE IF NOT EXISTS commits (
+    id TEXT PRIMARY KEY, time INTEGER NOT NULL, author TEXT NOT NULL,
+    message TEXT NOT NULL, chunks TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
+CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
+"""
+
+_REV_COLUMNS = (
+    "item_id, table_name, chunk_id, data, insert_time, update_time, removed, author, commit_id"
+)
+
+
+def _revision(row: sqlite3.Row | tuple) -> Revision:
+    item_id, table, chunk, data, inserted, updated, removed, author, commit = row
+    return Revision(
+        ItemId(item_id),
+        table,
+        ChunkId(chunk),
+        bytes(data),
+        inserted,
+        updated,
+        bool(removed),
+        PeerId(author),
+        CommitId(commit),
+    )
+
+
+def _scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
+    clauses, args = [], []
+    if table is not None:
+        clauses.append("table_name = ?")
+        args.append(table)
+    if chunk is not None:
+        clauses.append("chunk_id = ?")
+        args.append(chunk)
+    return "".join(f" AND r.{c}" for c in clauses), args
+
+
+class SqliteStore:
+    """A `Store` in one SQLite file (see the module docstring)."""
+
+    def __init__(self, path: str | Path, *, create: bool = False) -> None:
+        """Open (or with `create`, create) the store at `path`.
+
+        Raises:
+            CorruptRepoError: the file is not a SQLite database or not a mapapi store.
+        """
+        self.path = Path(path)
+        if not create and not self.path.exists():
+            raise CorruptRepoError(f"store file {self.path} is missing")
+        self._local = threading.local()
+        self._all: list[sqlite3.Connection] = []
+        self._all_lock = threading.Lock()
+        try:
+            self._setup(create)
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise CorruptRepoError(
+                f"{self.path} is not a mapapi store ({exc}); restore it from a backup "
+                "or clone the repository again"
+            ) from exc
+
+    def _setup(self, create: bool) -> None:
+        con = self._con()
+        if create:
+            con.execute("PRAGMA journal_mode=WAL")
+            with self._write(con):
+                for statement in _SCHEMA.split(";"):
+                    if statement.strip():
+                        con.execute(statement)
+                con.execute(
+                    "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('version', ?), ('clock', '0')",
+                    (FORMAT, str(SCHEMA_VERSION)),
+                )
+        row = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
+        if row is None or row[0] != FORMAT:
+            raise sqlite3.DatabaseError("no mapapi format marker")
+
+    def _con(self) -> sqlite3.Connection:
+        con: sqlite3.Connection | None = getattr(self._local, "con", None)
+        if con is None:
+            con = sqlite3.connect(
+                self.path, isolation_level=None, check_same_thread=False, timeout=30
+            )
+            con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+            con.execute("PRAGMA synchronous=NORMAL")
+            con.execute("PRAGMA foreign_keys=ON")
+            self._local.con = con
+            self._local.depth = 0
+            with self._all_lock:
+                self._all.append(con)
+        return con
+
+    @contextmanager
+    def _write(self, con: sqlite3.Connection) -> Iterator[None]:
+        """One write transaction; nested uses join the outer one."""
+        if self._local.depth:
+            self._local.depth += 1
+            try:
+                yield
+            finally:
+                self._local.depth -= 1
+            return
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:
+            raise LockTimeout(f"repository {self.path} stayed locked: {exc}") from exc
+        self._local.depth = 1
+        try:
+            yield
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
+        else:
+            con.execute("COMMIT")
+        finally:
+            self._local.depth = 0
+
+    def close(self) -> None:
+        """Close every connection opened by any thread."""
+        with self._all_lock:
+            for con in self._all:
+                con.close()
+            self._all.clear()
+        self._local = threading.local()
+
+    def clock(self) -> int:
+        """The highest applied commit time."""
+        row = self._con().execute("SELECT value FROM meta WHERE key = 'clock'").fetchone()
+        return int(row[0])
+
+    @contextmanager
+    def exclusive(self) -> Iterator[None]:
+        """Hold SQLite's write lock (other processes' committers wait)."""
+        with self._write(self._con()):
+            yield
+
+    def get_meta(self, key: str) -> str | None:
+        """A value of the store's key-value metadata."""
+        row = self._con().execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def add_table(self, name: str, type_name: str) -> None:
+        """Register a table."""
+        con = self._con()
+        with self._write(con):
+            try:
+                con.execute("INSERT INTO tables VALUES (?, ?)", (name, type_name))
+            except sqlite3.IntegrityError:
+                raise UsageError(f"table {name!r} already exists") from None
+
+    def tables(self) -> dict[str, str]:
+        """Table name -> type name."""
+        return dict(self._con().execute("SELECT name, type_name FROM tables ORDER BY name"))
+
+    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
+        """Register a chunk."""
+        con = self._con()
+        with self._write(con):
+            try:
+                con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+            except sqlite3.IntegrityError:
+                raise UsageError(f"no table {table!r}") from None
+
+    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
+        """Chunks with their live item counts now."""
+        sql = """
+            SELECT c.id, c.table_name, COUNT(r.item_id) FROM chunks c
+            LEFT JOIN revisions r ON r.chunk_id = c.id AND r.removed = 0
+             AND r.update_time = (SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)
+            WHERE ? IS NULL OR c.table_name = ?
+            GROUP BY c.id ORDER BY c.id"""
+        rows = self._con().execute(sql, (table, table))
+        return [ChunkInfo(ChunkId(cid), t, n) for cid, t, n in rows]
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        """The table of a chunk."""
+        row = (
+            self._con()
+            .execute("SELECT table_name FROM chunks WHERE id = ?", (chunk_id,))
+            .fetchone()
+        )
+        if row is None:
+            raise ChunkNotFound(f"no chunk {chunk_id} here")
+        return str(row[0])
+
+    def read(self, item_id: ItemId, time: int) -> Revision | None:
+        """Newest revision at or before `time`."""
+        row = (
+            self._con()
+            .execute(
+                f"SELECT {_REV_COLUMNS} FROM revisions WHERE item_id = ? AND update_time <= ? "
+                "ORDER BY update_time DESC LIMIT 1",
+                (item_id, time),
+            )
+            .fetchone()
+        )
+        return None if row is None else _revision(row)
+
+    def history(self, item_id: ItemId) -> list[Revision]:
+        """All revisions of an item."""
+        rows = self._con().execute(
+            f"SELECT {_REV_COLUMNS} FROM revisions WHERE item_id = ? ORDER BY update_time",
+            (item_id,),
+        )
+        return [_revision(r) for r in rows]
+
+    def scan(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """Items visible at `time`."""
+        where, args = _scope(table, chunk)
+        sql = (
+            f"SELECT {_REV_COLUMNS.replace('item_id', 'r.item_id', 1)} FROM revisions r "
+            "WHERE r.update_time = (SELECT MAX(update_time) FROM revisions "
+            "  WHERE item_id = r.item_id AND update_time <= ?) "
+            f"AND r.removed = 0{where} ORDER BY r.item_id"
+        )
+        return [_revision(row) for row in self._con().execute(sql, [time, *args])]
+
+    def latest(self, item_ids: Sequence[ItemId]) -> dict[ItemId, Revision]:
+        """Newest revision per item."""
+        out: dict[ItemId, Revision] = {}
+        con = self._con()
+        for start in range(0, len(item_ids), 500):
+            batch = list(item_ids[start : start + 500])
+            marks = ",".join("?" * len(batch))
+            sql = (
+                f"SELECT {_REV_COLUMNS.replace('item_id', 'r.item_id', 1)} FROM revisions r "
+                f"WHERE r.item_id IN ({marks}) AND r.update_time = "
+                "(SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)"
+            )
+            for row in con.execute(sql, batch):
+                revision = _revision(row)
+                out[revision.item_id] = revision
+        return out
+
+    def changed_since(
+        self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
+    ) -> list[Revision]:
+        """Revisions written after `time`."""
+        where, args = _scope(table, chunk)
+        sql = (
+            f"SELECT {_REV_COLUMNS} FROM revisions r WHERE r.update_time > ?{where} "
+            "ORDER BY r.update_time, r.item_id"
+        )
+        return [_revision(row) for row in self._con().execute(sql, [time, *args])]
+
+    def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
+        """Write the record and its revisions in one SQL transaction."""
+        con = self._con()
+        with self._write(con):
+            if con.execute("SELECT 1 FROM commits WHERE id = ?", (record.id,)).fetchone():
+                return  # already applied: applying is idempotent
+            con.execute(
+                "INSERT INTO commits VALUES (?, ?, ?, ?, ?)",
+                (record.id, record.time, record.author, record.message, ",".join(record.chunks)),
+            )
+            con.executemany(
+                "INSERT INTO revisions (item_id, update_time, table_name, chunk_id, data, "
+                "insert_time, removed, author, commit_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                [
+                    (
+                        r.item_id,
+                        r.update_time,
+                        r.table,
+                        r.chunk_id,
+                        r.data,
+                        r.insert_time,
+                        int(r.removed),
+                        r.author,
+                        r.commit_id,
+                    )
+                    for r in revisions
+                ],
+            )
+            con.execute(
+                "UPDATE meta SET value = MAX(CAST(value AS INTEGER), ?) WHERE key = 'clock'",
+                (record.time,),
+            )
+
+    def _record(self, row: tuple) -> CommitRecord:
+        cid, time, author, message, chunks = row
+        return CommitRecord(
+            CommitId(cid),
+            time,
+            PeerId(author),
+            message,
+            tuple(ChunkId(c) for c in chunks.split(",") if c),
+        )
+
+    def commits(self, limit: int | None = None) -> list[CommitRecord]:
+        """Newest first."""
+        rows = self._con().execute(
+            "SELECT id, time, author, message, chunks FROM commits "
+            "ORDER BY time DESC, id DESC LIMIT ?",
+            (-1 if limit is None else limit,),
+        )
+        return [self._record(r) for r in rows]
+
+    def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
+        """One record."""
+        row = (
+            self._con()
+            .execute(
+                "SELECT id, time, author, message, chunks FROM commits WHERE id = ?", (commit_id,)
+            )
+            .fetchone()
+        )
+        return None if row is None else self._record(row)
+
+    def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
+        """What one commit wrote."""
+        rows = self._con().execute(
+            f"SELECT {_REV_COLUMNS} FROM revisions WHERE commit_id = ? ORDER BY item_id",
+            (commit_id,),
+        )
+        return [_revision(r) for r in rows]
+
+    def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
+        """Ids starting with `prefix`."""
+        table, column = {
+            "item": ("revisions", "item_id"),
+            "chunk": ("chunks", "id"),
+            "commit": ("commits", "id"),
+        }[kind]
+        hi = prefix + "g"  # every hex id with this prefix sorts below prefix + 'g'
+        rows = self._con().execute(
+            f"SELECT DISTINCT {column} FROM {table} WHERE {column} >= ? AND {column} < ? "
+            f"ORDER BY {column} LIMIT 2",
+            (prefix, hi),
+        )
+        return [r[0] for r in rows]
+
+    def load_view(self, name: str) -> bytes | None:
+        """A view."""
+        row = self._con().execute("SELECT body FROM views WHERE name = ?", (name,)).fetchone()
+        return None if row is None else bytes(row[0])
+
+    def save_view(self, name: str, blob: bytes) -> None:
+        """Store a view."""
+        con = self._con()
+        with self._write(con):
+            con.execute("INSERT OR REPLACE INTO views VALUES (?, ?)", (name, blob))
+
+    def delete_view(self, name: str) -> None:
+        """Drop a view."""
+        con = self._con()
+        with self._write(con):
+            con.execute("DELETE FROM views WHERE name = ?", (name,))
+
+    def views(self) -> dict[str, bytes]:
+        """All views."""
+        return {n: bytes(b) for n, b in self._con().execute("SELECT name, body FROM views")}

@@ -1,0 +1,125 @@
+"""Tables: a name bound to a protobuf message type, with JSON in and out."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from google.protobuf import json_format, message_factory, struct_pb2, wrappers_pb2
+from google.protobuf.descriptor_pool import Default as _default_pool
+from google.protobuf.message import DecodeError, Message
+
+from mapapi.errors import UsageError
+
+# Imported for their side effect: they register the built-in types in the pool.
+_BUILTIN_MODULES = (struct_pb2, wrappers_pb2)
+BUILTIN_TYPES = (
+    "google.protobuf.Struct",
+    "google.protobuf.Int64Value",
+    "google.protobuf.DoubleValue",
+    "google.protobuf.StringValue",
+    "mapapi.v1.Counter",
+    "mapapi.v1.Account",
+)
+
+
+def message_class(type_name: str) -> type[Message]:
+    """The Python class of the protobuf message called `type_name`.
+
+    Any message type imported into the default descriptor pool works; the
+    built-ins (`BUILTIN_TYPES`) are always there.
+
+    Raises:
+        UsageError: no such message type is known.
+    """
+    from mapapi import codec  # registers mapapi.v1.* in the pool
+
+    codec.ensure_registered()
+    try:
+        descriptor = _default_pool().FindMessageTypeByName(type_name)
+    except KeyError:
+        raise UsageError(
+            f"unknown message type {type_name!r}; built-in types: {', '.join(BUILTIN_TYPES)}"
+        ) from None
+    return message_factory.GetMessageClass(descriptor)
+
+
+BBoxFn = Callable[[Message], tuple[float, float, float, float, float, float] | None]
+
+
+@dataclass(frozen=True)
+class TableDescriptor:
+    """A named collection of items of one protobuf message type.
+
+    Attributes:
+        name: the table's name, unique in a repository.
+        message_type: the payload class; `google.protobuf.Struct` holds schemaless JSON.
+        bbox: optional function giving an item's bounding box (xmin, ymin, zmin,
+            xmax, ymax, zmax), used by the spatial index.
+    """
+
+    name: str
+    message_type: type[Message]
+    bbox: BBoxFn | None = field(default=None, compare=False)
+
+    @classmethod
+    def named(cls, name: str, type_name: str) -> TableDescriptor:
+        """A descriptor for `name` whose type is looked up by its full protobuf name."""
+        return cls(name, message_class(type_name))
+
+    @property
+    def type_name(self) -> str:
+        """The full protobuf name of the payload type."""
+        return str(self.message_type.DESCRIPTOR.full_name)
+
+    def encode(self, message: Message) -> bytes:
+        """Serialize a payload; refuses a message of another type."""
+        if not isinstance(message, self.message_type):
+            raise UsageError(
+                f"table {self.name!r} holds {self.type_name}, "
+                f"not {type(message).DESCRIPTOR.full_name}"
+            )
+        return bytes(message.SerializeToString(deterministic=True))
+
+    def decode(self, data: bytes) -> Message:
+        """Parse a stored payload."""
+        message = self.message_type()
+        try:
+            message.ParseFromString(data)
+        except DecodeError as exc:
+            raise UsageError(f"stored item of table {self.name!r} does not parse: {exc}") from exc
+        return message
+
+    def from_json(self, text: str) -> Message:
+        """Parse JSON text (protobuf JSON mapping) into a payload.
+
+        Raises:
+            UsageError: the text is not JSON, or does not fit the type.
+        """
+        message = self.message_type()
+        try:
+            json_format.Parse(text, message)
+        except json_format.ParseError as exc:
+            raise UsageError(f"data does not fit table {self.name!r} ({self.type_name}): {exc}")
+        return message
+
+    def to_dict(self, message: Message) -> Any:
+        """The payload as a JSON-compatible value (protobuf JSON mapping)."""
+        return json_format.MessageToDict(message, preserving_proto_field_name=True)
+
+    def data_to_dict(self, data: bytes) -> Any:
+        """`to_dict` of a stored payload."""
+        return self.to_dict(self.decode(data))
+
+    def field_value(self, message: Message, name: str) -> Any:
+        """The value of field `name` in its JSON form (None when absent)."""
+        value = self.to_dict(message)
+        if not isinstance(value, dict):
+            return None
+        return value.get(name)
+
+    def field_json(self, message: Message, name: str) -> str:
+        """`field_value` as canonical JSON text, so values compare across types."""
+        return json.dumps(self.field_value(message, name), sort_keys=True)

@@ -1,0 +1,230 @@
+"""Named views kept in the repository between commands: git's index for maps.
+
+`mapctl view open` records a begin time; `set`/`rm` stage changes; `commit`
+commits them. A failed commit keeps the non-conflicting changes and records
+the conflicts in the view, begun again at the time the conflicts were seen;
+`resolve` picks a side per conflict and `commit` runs again (DESIGN §9).
+Every mutation of a view happens under the store's write lock, so two
+processes working on one view cannot lose each other's staged changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Literal
+
+from mapapi import codec
+from mapapi.errors import ConflictError, UnresolvedConflicts, UsageError, ViewClosedError
+from mapapi.history import CommitRecord
+from mapapi.ids import ChunkId, ItemId
+from mapapi.peer import Peer
+from mapapi.transaction import Change, Conflict, Isolation, Op, Transaction
+
+DEFAULT_VIEW = "main"
+Side = Literal["ours", "theirs"]
+
+
+@dataclass
+class View:
+    """A persisted transaction: begin time, staged changes, open conflicts."""
+
+    name: str
+    begin_time: int
+    isolation: Isolation = "snapshot"
+    changes: list[Change] = field(default_factory=list)
+    conflicts: list[Conflict] = field(default_factory=list)
+
+
+class Workspace:
+    """The views of one peer's repository."""
+
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+
+    # -- persistence ---------------------------------------------------------
+    def get(self, name: str) -> View | None:
+        """The view called `name`, or None."""
+        blob = self.peer.store.load_view(name)
+        if blob is None:
+            return None
+        _, begin, isolation, changes, conflicts = codec.decode_view(blob)
+        iso: Isolation = "serializable" if isolation == "serializable" else "snapshot"
+        return View(name, begin, iso, changes, conflicts)
+
+    def _save(self, view: View) -> None:
+        blob = codec.encode_view(
+            view.name, view.begin_time, view.isolation, view.changes, view.conflicts
+        )
+        self.peer.store.save_view(view.name, blob)
+
+    @contextmanager
+    def _editing(self, name: str, *, create: bool = True) -> Iterator[View]:
+        """Load (or open at now) a view under the write lock, save it after."""
+        with self.peer.store.exclusive():
+            view = self.get(name)
+            if view is None:
+                if not create:
+                    raise ViewClosedError(f"no open view {name!r}; run `mapctl view open`")
+                view = View(name, self.peer.now())
+            yield view
+            self._save(view)
+
+    def views(self) -> list[View]:
+        """Every view, by name."""
+        return [v for n in sorted(self.peer.store.views()) if (v := self.get(n)) is not None]
+
+    def open(self, name: str, at: int | None = None, isolation: Isolation = "snapshot") -> View:
+        """Begin a view now, or at the past logical time `at`.
+
+        Raises:
+            ViewClosedError: the view exists and holds staged changes or conflicts.
+        """
+        tx = self.peer.begin(at, isolation=isolation)  # validates `at`
+        with self.peer.store.exclusive():
+            old = self.get(name)
+            if old is not None and (old.changes or old.conflicts):
+                raise ViewClosedError(
+                    f"view {name!r} has {len(old.changes)} staged change(s) and "
+                    f"{len(old.conflicts)} conflict(s); commit or `mapctl view abort` first"
+                )
+            view = View(name, tx.begin_time, isolation)
+            self._save(view)
+        return view
+
+    def abort(self, name: str) -> None:
+        """Drop a view with its staged changes and conflicts."""
+        if self.get(name) is None:
+            raise ViewClosedError(f"no open view {name!r}")
+        self.peer.store.delete_view(name)
+
+    # -- reads and staging -----------------------------------------------------
+    def transaction(self, view: View) -> Transaction:
+        """A live transaction equivalent to the view."""
+        tx = Transaction(self.peer, view.begin_time, self.peer.id, isolation=view.isolation)
+        for change in view.changes:
+            tx.stage(change)
+        return tx
+
+    def reader(self, name: str, at: int | None = None) -> Transaction:
+        """What `get`/`ls` read through: the view if open (and no `at`), else the map."""
+        view = self.get(name) if at is None else None
+        return self.transaction(view) if view is not None else self.peer.begin(at)
+
+    def stage_set(
+        self, name: str, table: str, data: str, item_id: ItemId | None, chunk: ChunkId | None
+    ) -> ItemId:
+        """Stage an insert (no `item_id`) or an update of JSON `data`."""
+        descriptor = self.peer.table(table)
+        message = descriptor.from_json(data)
+        with self._editing(name) as view:
+            tx = self.transaction(view)
+            if item_id is None:
+                item_id = tx.insert(table, message, chunk or self._default_chunk(table))
+            else:
+                if chunk is not None:
+                    raise UsageError("--chunk only applies to inserts (no ID given)")
+                tx.update(table, item_id, message)
+            view.changes = tx.changes
+        return item_id
+
+    def _default_chunk(self, table: str) -> ChunkId:
+        chunks = self.peer.chunks(table)
+        if len(chunks) == 1:
+            return chunks[0].id
+        if not chunks:
+            raise UsageError(f"table {table!r} has no chunk; run `mapctl chunk create {table}`")
+        raise UsageError(f"table {table!r} has {len(chunks)} chunks; pass --chunk ID")
+
+    def stage_remove(self, name: str, table: str, item_id: ItemId) -> None:
+        """Stage the removal of an item."""
+        with self._editing(name) as view:
+            tx = self.transaction(view)
+            tx.remove(table, item_id)
+            view.changes = tx.changes
+
+    # -- commit and conflicts -----------------------------------------------
+    async def commit(self, name: str, message: str) -> CommitRecord | None:
+        """Commit a view's staged changes; the view closes on success.
+
+        Raises:
+            UnresolvedConflicts: the view still holds conflicts.
+            ConflictError: the commit conflicted; the view now holds the
+                conflicts plus the non-conflicting changes, begun again.
+        """
+        failure: ConflictError | None = None
+        record = None
+        with self.peer.store.exclusive():
+            view = self.get(name)
+            if view is None or not (view.changes or view.isolation == "serializable"):
+                raise UsageError(f"nothing to commit in view {name!r}; stage changes with `set`")
+            if view.conflicts:
+                raise UnresolvedConflicts(
+                    f"view {name!r} has {len(view.conflicts)} unresolved conflict(s); "
+                    "run `mapctl diff`, then `mapctl resolve`"
+                )
+            tx = self.transaction(view)
+            try:
+                record = await tx.commit(message)
+            except ConflictError as err:
+                failure = err
+                merged = err.merge()
+                view.begin_time, view.changes = merged.begin_time, merged.changes
+                view.conflicts = err.conflicts
+                self._save(view)
+            else:
+                self.peer.store.delete_view(name)
+        if failure is not None:
+            raise failure
+        return record
+
+    def resolve(
+        self,
+        name: str,
+        side: Side,
+        item_ids: Iterable[ItemId] = (),
+        edited: dict[ItemId, bytes] | None = None,
+    ) -> list[ItemId]:
+        """Settle conflicts: keep `side`, or the `edited` payload where given.
+
+        Args:
+            item_ids: which conflicts (all when empty); prefixes are not expanded here.
+            edited: item -> payload that replaces both sides.
+
+        Returns:
+            The items resolved.
+        """
+        edited = edited or {}
+        with self._editing(name, create=False) as view:
+            wanted = set(item_ids) or {c.item_id for c in view.conflicts}
+            unknown = wanted - {c.item_id for c in view.conflicts}
+            if unknown:
+                raise UsageError(f"no conflict on item(s) {', '.join(sorted(unknown))}")
+            tx = self.transaction(view)
+            keep = []
+            for conflict in view.conflicts:
+                if conflict.item_id not in wanted:
+                    keep.append(conflict)
+                    continue
+                change = _resolution(conflict, side, edited.get(conflict.item_id))
+                if change is None:
+                    tx.unstage(conflict.item_id)
+                else:
+                    tx.stage(change)
+            view.changes, view.conflicts = tx.changes, keep
+        return sorted(wanted)
+
+
+def _resolution(conflict: Conflict, side: Side, edited: bytes | None) -> Change | None:
+    """The change that settles one conflict (None: keep theirs, stage nothing)."""
+    theirs_gone = conflict.theirs.removed
+    if edited is not None:
+        return Change(Op.UPDATE, conflict.table, conflict.item_id, conflict.chunk_id, edited)
+    ours = conflict.ours
+    if side == "theirs" or ours is None:
+        return None
+    if ours.op is Op.REMOVE:
+        return None if theirs_gone else ours
+    # The item exists now (theirs), so our insert or update becomes an update.
+    return Change(Op.UPDATE, ours.table, ours.item_id, ours.chunk_id, ours.data)

@@ -1,0 +1,1 @@
+"""mapctl: the command line over mapapi."""

@@ -1,0 +1,5 @@
+"""`python -m mapctl`."""
+
+from mapctl.cli import main
+
+main()

@@ -1,0 +1,65 @@
+"""The `mapctl` click group, its global options and the single error boundary."""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from pathlib import Path
+
+import click
+
+from mapctl.commands import bench, history, repo, view
+from mapctl.session import Session
+
+EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option(
+    "-C",
+    "path",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("."),
+    help="Run as if started in PATH (like git -C).",
+)
+@click.option("--view", "view_name", default="main", show_default=True, help="The named view.")
+@click.option("-v", "--verbose", is_flag=True, help="Show tracebacks on errors.")
+@click.version_option(package_name="mapapi")
+@click.pass_context
+def cli(ctx: click.Context, path: Path, view_name: str, verbose: bool) -> None:
+    """mapctl: a git-like, decentralized map repository for robot swarms."""
+    session = Session(path, view_name, verbose)
+    ctx.obj = session
+    ctx.call_on_close(session.close)
+
+
+for module in (repo, view, history, bench):
+    module.register(cli)
+
+
+def main() -> None:
+    """Entry point: run the CLI and turn errors into one line and an exit code."""
+    verbose = "-v" in sys.argv[1:] or "--verbose" in sys.argv[1:]
+    try:
+        cli.main(standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click.Abort:
+        click.echo("aborted", err=True)
+        sys.exit(EXIT_INTERRUPTED)
+    except KeyboardInterrupt:
+        click.echo("interrupted", err=True)
+        sys.exit(EXIT_INTERRUPTED)
+    except Exception as exc:
+        from mapapi.errors import MapError
+
+        if verbose:
+            traceback.print_exc()
+        if isinstance(exc, MapError):
+            click.secho(f"error: {exc}", fg="red", err=True)
+            sys.exit(exc.exit_code)
+        click.secho(f"internal error: {exc!r}; rerun with -v for the traceback", fg="red", err=True)
+        sys.exit(1)

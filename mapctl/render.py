@@ -1,0 +1,96 @@
+"""Every rich Console / Table / diff rendering call of `mapctl` lives here.
+
+Humans get tables and a coloured side-by-side diff (added green, removed red,
+conflict yellow); scripts get exact JSON with `--json`.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+from rich.text import Text
+
+console = Console(highlight=False, soft_wrap=True)
+
+
+def emit_json(value: Any) -> None:
+    """Print exact JSON to stdout (one document)."""
+    sys.stdout.write(json.dumps(value, indent=None, sort_keys=False) + "\n")
+
+
+def line(text: str, style: str | None = None) -> None:
+    """One line for humans."""
+    console.print(Text(text, style=style or ""))
+
+
+def table(title: str, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+    """A rich table; an empty listing says so instead of drawing nothing."""
+    rows = list(rows)
+    if not rows:
+        line(f"no {title}", "dim")
+        return
+    grid = Table(title=title, title_justify="left")
+    for column in columns:
+        grid.add_column(column)
+    for row in rows:
+        grid.add_row(*("" if v is None else str(v) for v in row))
+    console.print(grid)
+
+
+def pretty_json(value: Any) -> None:
+    """A JSON value, indented and coloured for humans."""
+    from rich.json import JSON
+
+    console.print(JSON(json.dumps(value)))
+
+
+def _fields(value: Any) -> dict[str, Any]:
+    if value is None:
+        return {}
+    if isinstance(value, dict):
+        return value
+    return {"(value)": value}
+
+
+def _cell(value: Any) -> str:
+    return "" if value is None else json.dumps(value)
+
+
+def side_by_side(
+    title: str, sides: dict[str, Any], *, conflict: bool = False, marker: str = ""
+) -> None:
+    """A field-by-field diff of 2 or 3 sides (base, ours[, theirs]).
+
+    Fields that differ from the base are green where added or changed and red
+    where removed; in a conflict, fields both sides changed differently are yellow.
+    """
+    names = list(sides)
+    maps = {n: _fields(v) for n, v in sides.items()}
+    keys = sorted(set().union(*(m.keys() for m in maps.values())))
+    grid = Table(title=f"{title} {marker}".strip(), title_justify="left")
+    grid.add_column("field")
+    for name in names:
+        absent = sides[name] is None
+        grid.add_column(f"{name}{' (absent)' if absent else ''}")
+    base = maps[names[0]]
+    for key in keys:
+        cells = [Text(key)]
+        values = [maps[n].get(key) for n in names]
+        clash = conflict and len(names) == 3 and values[1] != values[0] != values[2] != values[1]
+        for i, value in enumerate(values):
+            style = ""
+            if i > 0 and value != base.get(key):
+                style = "yellow" if clash else ("red" if key not in maps[names[i]] else "green")
+            cells.append(Text(_cell(value), style=style))
+        grid.add_row(*cells)
+    console.print(grid)
+
+
+def error(text: str) -> None:
+    """A red line on stderr."""
+    Console(stderr=True, highlight=False).print(Text(text, style="red"))
