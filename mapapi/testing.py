@@ -1,0 +1,68 @@
+"""Pytest plugin: fixtures that build real peers and repositories and clean up.
+
+Registered through the `pytest11` entry point, so `mapctl` tests and users'
+own test suites get them too.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from mapapi.peer import Peer
+from mapapi.repo import Repository
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, interval: float = 0.01) -> None:
+    """Block until `predicate()` holds; fail naming the predicate after `timeout` s.
+
+    For cross-process state where no event can be awaited (a child's file, a
+    socket); in-process code should await the event that proves the state.
+    """
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            name = getattr(predicate, "__name__", repr(predicate))
+            raise AssertionError(f"timed out after {timeout}s waiting for {name}")
+        time.sleep(interval)  # sync-ok: polling another process's state
+
+
+@pytest.fixture
+def make_repo(tmp_path: Path) -> Callable[..., Repository]:
+    """Factory of initialised repositories under the test's temp folder."""
+    counter = iter(range(1_000_000))
+
+    def _make(name: str | None = None) -> Repository:
+        index = next(counter)
+        return Repository.init(tmp_path / f"repo{index}", name or f"peer{index}")
+
+    return _make
+
+
+@pytest.fixture
+async def make_peer(
+    make_repo: Callable[..., Repository],
+) -> AsyncIterator[Callable[..., Awaitable[Peer]]]:
+    """Factory of peers on real SQLite repositories; all are closed after the test."""
+    peers: list[Peer] = []
+
+    async def _make(name: str | None = None) -> Peer:
+        repo = make_repo(name)
+        peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+        peers.append(peer)
+        return peer
+
+    yield _make
+    for peer in peers:
+        await peer.close()
+
+
+@pytest.fixture
+def memory_peer() -> Iterator[Peer]:
+    """A scratch peer on an in-memory store."""
+    peer = Peer.in_memory()
+    yield peer
+    peer.store.close()
