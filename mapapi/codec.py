@@ -58,7 +58,7 @@ def revision_from_pb(m: core_pb2.Revision) -> Revision:
 def change_to_pb(c: Change) -> core_pb2.Change:
     """A buffered change as its protobuf message."""
     return core_pb2.Change(
-        op=c.op.value,
+        op=c.op.name,  # the proto enum uses the same names
         table=c.table,
         item_id=c.item_id.to_bytes(),
         chunk_id=c.chunk_id.to_bytes(),

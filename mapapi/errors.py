@@ -138,9 +138,36 @@ class LockTimeout(LockError):
     code = 31
 
 
+class LockNotHeld(LockError):
+    """A commit or unlock came from a writer without the current lease (stale token)."""
+
+    code = 32
+
+
 class NetworkError(MapError):
     """A message could not be delivered or answered."""
 
     retriable = True
     code = 40
     exit_code = 5
+
+
+class PeerUnavailable(NetworkError):
+    """The peer cannot be reached, or the local transport closed before it answered."""
+
+    retriable = True
+    code = 41
+
+
+class RequestTimeout(NetworkError):
+    """A request got no reply before its deadline."""
+
+    retriable = True
+    code = 42
+
+
+class ProtocolError(NetworkError):
+    """A message was malformed, truncated, unknown or oversized (DESIGN §11)."""
+
+    retriable = False
+    code = 43

@@ -16,10 +16,14 @@ from google.protobuf.message import Message
 MergePolicy = Callable[[Message | None, Message, Message], Message | None]
 
 
+def _json(message: Message) -> Any:
+    return json_format.MessageToDict(message, preserving_proto_field_name=True)
+
+
 def _fields(message: Message | None) -> dict[str, Any]:
     if message is None:
         return {}
-    value = json_format.MessageToDict(message, preserving_proto_field_name=True)
+    value = _json(message)
     return value if isinstance(value, dict) else {}
 
 
@@ -32,6 +36,10 @@ def disjoint_fields(base: Message | None, ours: Message, theirs: Message) -> Mes
     """
     if base is None:
         return None
+    if not all(isinstance(_json(m), dict) for m in (base, ours, theirs)):
+        # A payload whose JSON is not an object (a wrapper such as Int64Value)
+        # is one field: it merges only when one side left it unchanged.
+        return ours if theirs == base else theirs if ours == base else None
     b, o, t = _fields(base), _fields(ours), _fields(theirs)
     keys = set(b) | set(o) | set(t)
     ours_changed = {k for k in keys if o.get(k) != b.get(k)}

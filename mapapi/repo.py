@@ -17,6 +17,12 @@ CONFIG = "config.toml"
 STORE = "store.sqlite"
 
 
+def _toml_str(text: str) -> str:
+    """`text` as a TOML basic string: JSON quoting without the surrogate-pair
+    escapes TOML refuses (non-ASCII stays UTF-8), and DEL escaped (JSON leaves it raw)."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
 @dataclass(frozen=True)
 class RepoConfig:
     """What `config.toml` holds."""
@@ -26,7 +32,7 @@ class RepoConfig:
 
     def to_toml(self) -> str:
         """The config as TOML text (flat keys; strings quoted as JSON, valid TOML)."""
-        return f"name = {json.dumps(self.name)}\npeer_id = {json.dumps(str(self.peer_id))}\n"
+        return f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n"
 
     @classmethod
     def from_toml(cls, text: str, source: Path) -> RepoConfig:
@@ -65,12 +71,14 @@ class Repository:
         root = Path(path).resolve()
         meta = root / REPO_DIR
         if (meta / CONFIG).exists():
-            raise AlreadyInitialisedError(f"{root} is already a map repository")
+            raise AlreadyInitialisedError(
+                f"{root} is already a map repository; use it as is, or init another folder"
+            )
         meta.mkdir(parents=True, exist_ok=True)
         config = RepoConfig(name=name or root.name, peer_id=PeerId.new())
         SqliteStore(meta / STORE, create=True).close()
         tmp = meta / (CONFIG + ".tmp")
-        tmp.write_text(config.to_toml())
+        tmp.write_text(config.to_toml(), encoding="utf-8")
         tmp.replace(meta / CONFIG)  # the config appears last: its presence means "initialised"
         return cls(root, config)
 
@@ -85,7 +93,11 @@ class Repository:
         for folder in (here, *here.parents):
             config = folder / REPO_DIR / CONFIG
             if config.is_file():
-                return cls(folder, RepoConfig.from_toml(config.read_text(), config))
+                try:
+                    text = config.read_text(encoding="utf-8")
+                except UnicodeDecodeError as exc:
+                    raise CorruptRepoError(f"{config} is damaged: {exc}") from exc
+                return cls(folder, RepoConfig.from_toml(text, config))
         raise NotARepoError(
             f"not a map repository (or any parent): {here}; run `mapctl init` first"
         )

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mapapi.errors import ConflictError
 from mapapi.peer import Peer
 from mapapi.transaction import Transaction
 
@@ -56,7 +57,10 @@ class Blocking:
             return value
 
         def call(*args: Any, **kwargs: Any) -> Any:
-            result = self._runner.call(value, *args, **kwargs)
+            try:
+                result = self._runner.call(value, *args, **kwargs)
+            except ConflictError as err:
+                raise _BlockingConflict(err, self._runner) from err
             return Blocking(result, self._runner) if isinstance(result, _WRAPPED) else result
 
         return call
@@ -72,6 +76,18 @@ class Blocking:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _BlockingConflict(ConflictError):
+    """A `ConflictError` whose `merge()` returns a blocking transaction too."""
+
+    def __init__(self, err: ConflictError, runner: _LoopThread) -> None:
+        super().__init__(err.conflicts, err._transaction, err.resolved_at)
+        self._runner = runner
+
+    def merge(self) -> Blocking:  # type: ignore[override]
+        """See `ConflictError.merge`; the new transaction's methods block."""
+        return Blocking(super().merge(), self._runner)
 
 
 def open_peer(path: str | Path = ".") -> Blocking:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from google.protobuf import json_format, message_factory, struct_pb2, wrappers_pb2
+from google.protobuf.descriptor import FieldDescriptor
 from google.protobuf.descriptor_pool import Default as _default_pool
 from google.protobuf.message import DecodeError, Message
 
@@ -23,6 +24,8 @@ BUILTIN_TYPES = (
     "mapapi.v1.Counter",
     "mapapi.v1.Account",
 )
+
+_INT64_TYPES = (FieldDescriptor.CPPTYPE_INT64, FieldDescriptor.CPPTYPE_UINT64)
 
 
 def message_class(type_name: str) -> type[Message]:
@@ -102,24 +105,59 @@ class TableDescriptor:
         try:
             json_format.Parse(text, message)
         except json_format.ParseError as exc:
-            raise UsageError(f"data does not fit table {self.name!r} ({self.type_name}): {exc}")
+            raise UsageError(
+                f"data does not fit table {self.name!r} ({self.type_name}): {exc}"
+            ) from exc
         return message
 
     def to_dict(self, message: Message) -> Any:
-        """The payload as a JSON-compatible value (protobuf JSON mapping)."""
-        return json_format.MessageToDict(message, preserving_proto_field_name=True)
+        """The payload as a JSON-compatible value (protobuf JSON mapping).
+
+        Struct maps come out with sorted keys, so output is stable across runs.
+        """
+        value = json_format.MessageToDict(message, preserving_proto_field_name=True)
+        if isinstance(message, struct_pb2.Struct):
+            value = json.loads(json.dumps(value, sort_keys=True))
+        return value
 
     def data_to_dict(self, data: bytes) -> Any:
         """`to_dict` of a stored payload."""
         return self.to_dict(self.decode(data))
 
     def field_value(self, message: Message, name: str) -> Any:
-        """The value of field `name` in its JSON form (None when absent)."""
-        value = self.to_dict(message)
+        """The value of field `name` in its JSON form (None when absent).
+
+        Unset proto3 scalars read as their defaults (0, "", false) and 64-bit
+        integers as numbers (the JSON mapping quotes them), so a search for
+        `value == 0` or `value == 5` finds what the user means.
+        """
+        value = json_format.MessageToDict(
+            message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
+        )
         if not isinstance(value, dict):
             return None
-        return value.get(name)
+        found = value.get(name)
+        desc = message.DESCRIPTOR.fields_by_name.get(name)
+        if found is not None and desc is not None and desc.cpp_type in _INT64_TYPES:
+            found = [int(v) for v in found] if isinstance(found, list) else int(found)
+        return found
 
     def field_json(self, message: Message, name: str) -> str:
-        """`field_value` as canonical JSON text, so values compare across types."""
-        return json.dumps(self.field_value(message, name), sort_keys=True)
+        """`field_value` as canonical JSON text (see `canonical_json`)."""
+        return self.canonical_json(self.field_value(message, name))
+
+    @staticmethod
+    def canonical_json(value: Any) -> str:
+        """JSON text that equal JSON values share: keys sorted, integral numbers
+        written as integers (JSON has one number type; Struct stores doubles)."""
+        return json.dumps(_integral_as_int(value), sort_keys=True)
+
+
+def _integral_as_int(value: Any) -> Any:
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, dict):
+        return {k: _integral_as_int(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_integral_as_int(v) for v in value]
+    return value

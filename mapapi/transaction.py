@@ -10,7 +10,6 @@ exists; with `isolation="serializable"` the read set is validated too.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from enum import Enum
@@ -101,7 +100,9 @@ def validate(
         written.add(change.item_id)
         theirs = latest.get(change.item_id)
         if change.op is Op.INSERT:
-            if theirs is None:
+            # A tombstone we already saw (before our begin, or our own removal)
+            # does not make the id "exist": re-inserting it is no conflict.
+            if theirs is None or (theirs.removed and theirs.update_time <= since(change.item_id)):
                 accepted.append(change)
             else:
                 conflicts.append(_conflict(change.item_id, change, theirs, base_of))
@@ -320,7 +321,7 @@ class Transaction:
     ) -> dict[ItemId, Message]:
         """Items whose `field` equals `value` (compared in the JSON mapping)."""
         descriptor = self._backend.table(table)
-        wanted = json.dumps(value, sort_keys=True)
+        wanted = descriptor.canonical_json(value)
         return {
             i: m
             for i, m in (await self.items(table, chunk)).items()

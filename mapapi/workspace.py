@@ -96,7 +96,7 @@ class Workspace:
     def abort(self, name: str) -> None:
         """Drop a view with its staged changes and conflicts."""
         if self.get(name) is None:
-            raise ViewClosedError(f"no open view {name!r}")
+            raise ViewClosedError(f"no open view {name!r}; `mapctl view list` shows the open views")
         self.peer.store.delete_view(name)
 
     # -- reads and staging -----------------------------------------------------
@@ -148,7 +148,12 @@ class Workspace:
     async def commit(self, name: str, message: str) -> CommitRecord | None:
         """Commit a view's staged changes; the view closes on success.
 
+        Returns:
+            The commit record, or None when the open view had nothing to write
+            (say every conflict was resolved as theirs); the view closes too.
+
         Raises:
+            UsageError: no such view.
             UnresolvedConflicts: the view still holds conflicts.
             ConflictError: the commit conflicted; the view now holds the
                 conflicts plus the non-conflicting changes, begun again.
@@ -157,13 +162,17 @@ class Workspace:
         record = None
         with self.peer.store.exclusive():
             view = self.get(name)
-            if view is None or not (view.changes or view.isolation == "serializable"):
+            if view is None:
                 raise UsageError(f"nothing to commit in view {name!r}; stage changes with `set`")
+            # Conflicts first: a failed commit may leave nothing staged but conflicts.
             if view.conflicts:
                 raise UnresolvedConflicts(
                     f"view {name!r} has {len(view.conflicts)} unresolved conflict(s); "
                     "run `mapctl diff`, then `mapctl resolve`"
                 )
+            if not (view.changes or view.isolation == "serializable"):
+                self.peer.store.delete_view(name)
+                return None
             tx = self.transaction(view)
             try:
                 record = await tx.commit(message)

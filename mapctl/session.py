@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -44,6 +43,8 @@ class Session:
 
     def run(self, coro: Coroutine[Any, Any, T]) -> T:
         """Run one library coroutine to completion."""
+        import asyncio  # here, not at the top: `mapctl --help` never needs it
+
         return asyncio.run(coro)
 
     def resolve_id(self, kind: IdKind, text: str) -> str:
@@ -51,10 +52,10 @@ class Session:
         from mapapi.errors import UsageError
 
         text = text.lower()
+        if not 4 <= len(text) <= 32 or any(c not in "0123456789abcdef" for c in text):
+            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
         if len(text) == 32:
             return text
-        if len(text) < 4 or any(c not in "0123456789abcdef" for c in text):
-            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
         found = self.peer.store.resolve_prefix(kind, text)
         if not found:
             raise UsageError(f"no {kind} id starts with {text!r}")

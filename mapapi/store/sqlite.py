@@ -66,7 +66,8 @@ def _revision(row: sqlite3.Row | tuple) -> Revision:
 
 
 def _scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
-    clauses, args = [], []
+    clauses: list[str] = []
+    args: list[object] = []
     if table is not None:
         clauses.append("table_name = ?")
         args.append(table)
@@ -102,14 +103,17 @@ class SqliteStore:
 
     def _setup(self, create: bool) -> None:
         con = self._con()
-        if create:
+        if create and con.execute("SELECT 1 FROM sqlite_master").fetchone() is None:
+            # Only an empty database becomes a new store: never add our tables to
+            # another application's database (it fails the marker check below).
             con.execute("PRAGMA journal_mode=WAL")
             with self._write(con):
                 for statement in _SCHEMA.split(";"):
                     if statement.strip():
                         con.execute(statement)
                 con.execute(
-                    "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('version', ?), ('clock', '0')",
+                    "INSERT OR IGNORE INTO meta VALUES "
+                    "('format', ?), ('version', ?), ('clock', '0')",
                     (FORMAT, str(SCHEMA_VERSION)),
                 )
         row = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()

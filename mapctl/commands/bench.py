@@ -14,14 +14,19 @@ def bench() -> None:
 
 @bench.command("local")
 @click.option("-n", "commits", default=500, show_default=True, help="Commits per measurement.")
+@click.option(
+    "--dir",
+    "directory",
+    type=click.Path(file_okay=False, exists=True),
+    help="Create the scratch repository here (default: the system temp folder).",
+)
 @json_option
-def bench_local(commits: int, as_json: bool) -> None:
+def bench_local(commits: int, directory: str | None, as_json: bool) -> None:
     """Single-peer figures: commits/s, past-time reads/s, CLI startup."""
     from mapapi.bench.local import run_local
-
     from mapctl import render
 
-    result = run_local(commits)
+    result = run_local(commits, directory)
     if as_json:
         render.emit_json(result)
     else:

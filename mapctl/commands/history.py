@@ -83,7 +83,7 @@ def show(session: Session, commit_ref: str, as_json: bool) -> None:
     commit_id = CommitId(session.resolve_id("commit", commit_ref))
     record = peer.commit_record(commit_id)
     if record is None:
-        raise UsageError(f"no commit {commit_id}")
+        raise UsageError(f"no commit {commit_id}; `mapctl log` lists the commits")
     changes = []
     for revision in peer.commit_revisions(commit_id):
         previous = peer.read_local(revision.item_id, revision.update_time - 1)

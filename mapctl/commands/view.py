@@ -1,4 +1,5 @@
-"""Views and staging: `view ...`, `status`, `set`, `get`, `ls`, `rm`, `commit`, `diff`, `resolve`."""
+"""Views and staging: `view ...`, `status`, `set`, `get`, `ls`, `rm`, `commit`, `diff`,
+`resolve`."""
 
 from __future__ import annotations
 
@@ -154,7 +155,10 @@ def get_item(session: Session, table_name: str, item: str, at: int | None, as_js
     tx = session.workspace.reader(session.view, at)
     message = session.run(tx.get(table_name, item_id))
     if message is None:
-        raise ItemNotFound(f"no item {item_id} in table {table_name!r} at time {tx.begin_time}")
+        raise ItemNotFound(
+            f"no item {item_id} in table {table_name!r} at time {tx.begin_time}; "
+            f"`mapctl ls {table_name}` lists the items"
+        )
     fields = session.peer.table(table_name).to_dict(message)
     if as_json:
         render.emit_json(fields)
@@ -224,6 +228,8 @@ def commit(session: Session, message: str, as_json: bool) -> None:
         render.emit_json(info)
     elif record is not None:
         render.line(f"[{record.id[:8]}] time {record.time}: {message or '(no message)'}", "green")
+    else:
+        render.line(f"nothing to write; view {session.view} closed")
 
 
 @click.command("diff")

@@ -1,0 +1,1 @@
+"""Measurements behind `mapctl bench ...`: they return figures, never judge them."""

@@ -1,0 +1,419 @@
+"""Message transport over ZeroMQ: one ROUTER in, one DEALER per remote peer out.
+
+Requests and notifications leave through the DEALER connected to the remote's
+address and arrive on the remote's ROUTER; a reply goes back through that
+ROUTER to the requesting DEALER. Each socket has one reader task that drains it
+in batches (one awaited receive, then non-blocking receives until empty), decodes
+and hands messages to a `Sink` (the RPC layer) without awaiting anything.
+
+This module is the one place that stamps the Lamport clock: `tick()` on every
+send, `merge()` on every decoded receive (DESIGN §4). It also counts traffic,
+applies optional link shaping and drops malformed or oversized input, answering
+it with an ErrorReply when the request id can be recovered (DESIGN §11).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass
+from typing import Any, Protocol, cast
+
+import zmq
+import zmq.asyncio
+
+from mapapi.clock import LamportClock
+from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError
+from mapapi.ids import PeerId
+from mapapi.net import codec
+from mapapi.net.codec import Envelope, ErrorReply, Kind
+from mapapi.net.shaping import Shaper
+from mapapi.net.stats import Stats
+
+log = logging.getLogger(__name__)
+
+DEFAULT_MAX_MESSAGE_SIZE = 64 * 1024 * 1024
+"""Larger messages are dropped and counted (and refused on send)."""
+
+_BATCH = 256  # messages drained per wake-up before other tasks get a turn
+# plain ints: pyzmq's IntFlag arithmetic costs a microsecond per message
+_EVENTS, _POLLIN, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.NOBLOCK)
+_HARD_LIMIT_FACTOR = 2  # libzmq disconnects senders beyond this multiple of the max
+
+
+@dataclass(frozen=True, slots=True)
+class Route:
+    """Where the reply to an inbound request goes: a ROUTER routing id."""
+
+    routing_id: bytes
+    peer: str  # the stats key of the remote: its PeerId, or "?<routing id>" if unknown
+
+
+@dataclass(frozen=True, slots=True)
+class Inbound:
+    """A decoded message handed to the sink.
+
+    Requests and notifications carry the `route` to reply on; replies carry the
+    `address` of the link they came back on.
+    """
+
+    envelope: Envelope
+    route: Route | None
+    address: str | None
+    size: int
+
+
+class Sink(Protocol):
+    """Receives what the transport decodes; must not block (it runs in a reader)."""
+
+    def on_message(self, msg: Inbound) -> None:
+        """A decoded, clock-merged message."""
+
+    def on_broken_reply(self, address: str, request_id: int, error: ProtocolError) -> None:
+        """A reply for `request_id` arrived from `address` but could not be decoded."""
+
+
+class Transport(Protocol):
+    """The seam between the RPC layer and the sockets (STYLE §1)."""
+
+    peer_id: PeerId
+    clock: LamportClock
+    stats: Stats
+
+    @property
+    def address(self) -> str:
+        """The endpoint remote peers connect to."""
+
+    def set_sink(self, sink: Sink) -> None:
+        """Where decoded messages go."""
+
+    async def start(self, bind: str = "tcp://127.0.0.1:0") -> str:
+        """Listen on `bind`; return the real endpoint."""
+
+    def send(self, address: str, kind: Kind, request_id: int, body: object) -> None:
+        """Send a request or notification to the peer listening at `address`."""
+
+    def reply(self, route: Route, request_id: int, body: object) -> None:
+        """Answer the request `request_id` that came in on `route`."""
+
+    async def forget(self, address: str) -> None:
+        """Drop the link to `address`."""
+
+    async def close(self) -> None:
+        """Stop reading, close every socket, release the context."""
+
+
+class ZmqTransport:
+    """The `Transport` over pyzmq with `zmq.asyncio` (STYLE §5).
+
+    Args:
+        peer_id: this peer, written into every envelope's `sender`.
+        clock: the peer's Lamport clock (a fresh one if omitted).
+        context: a zmq.asyncio context to share; by default the transport owns one.
+        max_message_size: larger messages are dropped and counted.
+        shaper: optional simulated latency/bandwidth per link (off by default).
+    """
+
+    def __init__(
+        self,
+        peer_id: PeerId,
+        clock: LamportClock | None = None,
+        *,
+        context: zmq.asyncio.Context | None = None,
+        max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE,
+        shaper: Shaper | None = None,
+    ) -> None:
+        self.peer_id = peer_id
+        self.clock = clock or LamportClock()
+        self.stats = Stats()
+        self.shaper = shaper
+        self.max_message_size = max_message_size
+        self._context = context
+        self._owns_context = context is None
+        self._router: zmq.asyncio.Socket | None = None
+        self._dealers: dict[str, zmq.asyncio.Socket] = {}
+        self._dealer_readers: dict[str, asyncio.Task[None]] = {}
+        self._readers: set[asyncio.Task[None]] = set()
+        self._timers: set[asyncio.TimerHandle] = set()
+        self._sink: Sink | None = None
+        self._address: str | None = None
+        self._closed = False
+
+    @property
+    def address(self) -> str:
+        """The bound endpoint, e.g. tcp://127.0.0.1:43121 (after `start`)."""
+        if self._address is None:
+            raise RuntimeError("transport not started")
+        return self._address
+
+    @property
+    def closed(self) -> bool:
+        """True once `close()` began."""
+        return self._closed
+
+    def set_sink(self, sink: Sink) -> None:
+        """Where decoded messages go (the RPC layer); set before `start`."""
+        self._sink = sink
+
+    async def start(self, bind: str = "tcp://127.0.0.1:0") -> str:
+        """Bind the ROUTER and start reading.
+
+        Args:
+            bind: a zmq endpoint; port 0 (or *) picks a free port.
+
+        Returns:
+            The real bound endpoint (LAST_ENDPOINT), which peers connect to.
+
+        Raises:
+            NetworkError: the address cannot be bound.
+        """
+        if self._router is not None or self._closed:
+            raise RuntimeError("transport already started or closed")
+        if self._context is None:
+            self._context = zmq.asyncio.Context()
+        router = self._socket(zmq.ROUTER)
+        try:
+            router.bind(bind)
+        except zmq.ZMQError as exc:
+            router.close(linger=0)
+            raise NetworkError(f"cannot listen on {bind}: {exc}") from exc
+        self._router = router
+        self._address = router.getsockopt_string(zmq.LAST_ENDPOINT)
+        self._spawn(self._read(router, self._on_router_frames), f"router {self._address}")
+        log.debug("peer %s listening on %s", self.peer_id.short, self._address)
+        return self._address
+
+    def send(self, address: str, kind: Kind, request_id: int, body: object) -> None:
+        """Stamp, encode and send a request or notification (never waits).
+
+        Raises:
+            PeerUnavailable: the transport is closed.
+            ValueError: `address` is not a valid zmq endpoint.
+            ProtocolError: the encoded message exceeds `max_message_size`.
+        """
+        if self._closed:
+            raise PeerUnavailable(f"cannot reach {address}: the transport is closed")
+        data = self._stamp(kind, request_id, body)
+        if len(data) > self.max_message_size:
+            raise ProtocolError(
+                f"message of {len(data)} bytes exceeds the limit of {self.max_message_size}"
+            )
+        self._out(self._dealer(address), [data], address, codec.body_name(body), len(data))
+
+    def reply(self, route: Route, request_id: int, body: object) -> None:
+        """Answer a request on the ROUTER (never waits; dropped by zmq if the peer left).
+
+        Raises:
+            PeerUnavailable: the transport is closed.
+        """
+        if self._closed or self._router is None:
+            raise PeerUnavailable(f"cannot answer {route.peer}: the transport is closed")
+        data = self._stamp(Kind.REPLY, request_id, body)
+        if len(data) > self.max_message_size:
+            body = ErrorReply(ProtocolError.code, f"reply of {len(data)} bytes is too large")
+            data = self._stamp(Kind.REPLY, request_id, body)
+        frames = [route.routing_id, data]
+        self._out(self._router, frames, route.peer, codec.body_name(body), len(data))
+
+    async def forget(self, address: str) -> None:
+        """Close the link to `address` (a peer that left); a later send reopens it."""
+        sock = self._dealers.pop(address, None)
+        task = self._dealer_readers.pop(address, None)
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+        if sock is not None:
+            sock.close(linger=0)
+
+    async def close(self) -> None:
+        """Cancel and await the readers, close every socket (LINGER=0), end the context."""
+        if self._closed:
+            return
+        self._closed = True
+        for handle in self._timers:
+            handle.cancel()
+        self._timers.clear()
+        readers = list(self._readers)
+        for task in readers:
+            task.cancel()
+        await asyncio.gather(*readers, return_exceptions=True)
+        for sock in [*self._dealers.values(), *([self._router] if self._router else [])]:
+            sock.close(linger=0)
+        self._dealers.clear()
+        self._dealer_readers.clear()
+        if self._owns_context and self._context is not None:
+            self._context.term()
+        log.debug("peer %s transport closed", self.peer_id.short)
+
+    # -- sending -------------------------------------------------------------
+
+    def _stamp(self, kind: Kind, request_id: int, body: object) -> bytes:
+        env = Envelope(request_id, self.peer_id, self.clock.tick(), kind, body)
+        return codec.encode(env)
+
+    def _socket(self, kind: int) -> zmq.asyncio.Socket:
+        assert self._context is not None
+        sock = self._context.socket(kind)
+        sock.setsockopt(zmq.LINGER, 0)
+        # A hard cap against memory exhaustion; below it we drop and count ourselves.
+        sock.setsockopt(zmq.MAXMSGSIZE, self.max_message_size * _HARD_LIMIT_FACTOR)
+        return sock
+
+    def _dealer(self, address: str) -> zmq.asyncio.Socket:
+        sock = self._dealers.get(address)
+        if sock is not None:
+            return sock
+        if self._context is None:
+            raise RuntimeError("transport not started")
+        sock = self._socket(zmq.DEALER)
+        try:
+            sock.connect(address)
+        except zmq.ZMQError as exc:
+            sock.close(linger=0)
+            raise ValueError(f"not a peer address: {address!r} ({exc})") from exc
+        self._dealers[address] = sock
+        self._dealer_readers[address] = self._spawn(
+            self._read(sock, lambda frames: self._on_dealer_frames(address, frames)),
+            f"dealer {address}",
+        )
+        return sock
+
+    def _out(
+        self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
+    ) -> None:
+        if self.shaper is not None:
+            loop = asyncio.get_running_loop()
+            at = self.shaper.arrival(peer, size, loop.time())
+            if at is not None:
+                self._later(loop, at, sock, frames, peer, msg_type, size)
+                return
+        self._transmit(sock, frames, peer, msg_type, size)
+
+    def _later(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        when: float,
+        sock: zmq.asyncio.Socket,
+        frames: list[bytes],
+        peer: str,
+        msg_type: str,
+        size: int,
+    ) -> None:
+        def fire() -> None:
+            self._timers.discard(handle)
+            self._transmit(sock, frames, peer, msg_type, size)
+
+        handle = loop.call_at(when, fire)
+        self._timers.add(handle)
+
+    def _transmit(
+        self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
+    ) -> None:
+        if sock.closed:
+            return
+        # zmq.asyncio sends at once when it can and otherwise queues the send;
+        # either way the returned future is only watched for failures.
+        fut = cast("asyncio.Future[object]", sock.send_multipart(frames, copy=True))
+        if fut.done():
+            _report_send(fut)
+        else:
+            fut.add_done_callback(_report_send)
+        self.stats.record_sent(peer, msg_type, size)
+
+    # -- receiving -----------------------------------------------------------
+
+    def _spawn(self, coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]:
+        task = asyncio.get_running_loop().create_task(coro, name=name)
+        self._readers.add(task)
+        task.add_done_callback(self._reader_done)
+        return task
+
+    def _reader_done(self, task: asyncio.Task[None]) -> None:
+        self._readers.discard(task)
+        if not task.cancelled() and task.exception() is not None:
+            log.error("reader %s stopped", task.get_name(), exc_info=task.exception())
+
+    async def _read(self, sock: zmq.asyncio.Socket, handle: Callable[[list[bytes]], None]) -> None:
+        # One awaited receive (the "poll"), then non-blocking receives through a
+        # plain shadow of the same socket while ZMQ_EVENTS says more is queued: a
+        # batch costs no futures. The next awaited receive re-checks ZMQ_EVENTS
+        # itself, so no edge of zmq's edge-triggered fd is lost.
+        shadow: zmq.Socket[bytes] = zmq.Socket.shadow(sock.underlying)
+        while True:
+            frames: list[bytes] = await sock.recv_multipart()
+            self._dispatch(handle, frames)
+            for _ in range(_BATCH):
+                if not cast(int, shadow.getsockopt(_EVENTS)) & _POLLIN:
+                    break
+                self._dispatch(handle, shadow.recv_multipart(_NOBLOCK))
+            else:
+                # A full batch: let other tasks run (awaiting a receive that can
+                # complete at once would not yield to them).
+                await asyncio.sleep(0)
+
+    def _dispatch(self, handle: Callable[[list[bytes]], None], frames: list[bytes]) -> None:
+        try:
+            handle(frames)
+        except Exception:  # a bug in one message's handling must not stop the reader
+            log.exception("peer %s failed to dispatch a message", self.peer_id.short)
+
+    def _on_router_frames(self, frames: list[bytes]) -> None:
+        route = Route(frames[0], "?" + frames[0].hex())
+        data = frames[1] if len(frames) > 1 else b""
+        size = sum(len(f) for f in frames[1:])
+        if len(frames) != 2 or size > self.max_message_size:
+            reason = "oversized" if size > self.max_message_size else "malformed"
+            self._reject(route, data, reason, size, f"{reason} message ({size} bytes)")
+            return
+        try:
+            env = codec.decode(data)
+        except ProtocolError as exc:
+            self._reject(route, data, "malformed", size, str(exc))
+            return
+        peer = str(env.sender)
+        if env.kind is Kind.REPLY:
+            self.stats.record_dropped(peer, "unexpected", size)
+            return
+        self.clock.merge(env.lamport)
+        self.stats.record_received(peer, env.body_name, size)
+        if self._sink is not None:
+            self._sink.on_message(Inbound(env, Route(route.routing_id, peer), None, size))
+
+    def _reject(self, route: Route, data: bytes, reason: str, size: int, why: str) -> None:
+        self.stats.record_dropped(route.peer, reason, size)
+        request_id = codec.peek_request_id(data)
+        log.debug("dropped %s message from %s: %s", reason, route.peer, why)
+        if request_id is not None and not self._closed:
+            self.reply(route, request_id, ErrorReply(ProtocolError.code, why))
+
+    def _on_dealer_frames(self, address: str, frames: list[bytes]) -> None:
+        size = sum(len(f) for f in frames)
+        data = frames[0] if frames else b""
+        error: ProtocolError | None = None
+        if len(frames) != 1 or size > self.max_message_size:
+            reason = "oversized" if size > self.max_message_size else "malformed"
+            error = ProtocolError(f"{reason} reply from {address} ({size} bytes)")
+        else:
+            try:
+                env = codec.decode(data)
+            except ProtocolError as exc:
+                reason, error = "malformed", exc
+        if error is not None:
+            self.stats.record_dropped(address, reason, size)
+            request_id = codec.peek_request_id(data)
+            if request_id is not None and self._sink is not None:
+                self._sink.on_broken_reply(address, request_id, error)
+            return
+        if env.kind is not Kind.REPLY:
+            self.stats.record_dropped(address, "unexpected", size)
+            return
+        self.clock.merge(env.lamport)
+        self.stats.record_received(address, env.body_name, size)
+        if self._sink is not None:
+            self._sink.on_message(Inbound(env, None, address, size))
+
+
+def _report_send(fut: asyncio.Future[object]) -> None:
+    if not fut.cancelled() and fut.exception() is not None:
+        log.warning("send failed: %s", fut.exception())

@@ -1,0 +1,304 @@
+"""The operations `mapctl` performs, as JSON in and JSON out.
+
+One `Operations` object wraps a `Peer` (and its views). The CLI calls it
+directly when no peer daemon runs on the repository, and through the control
+endpoint (`mapapi.control`) when one does, so every command behaves the same
+either way. Arguments and results are plain JSON values; ids are hex strings.
+Errors are `MapError`s, which travel as (code, message) over the endpoint.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, Any
+
+from mapapi.errors import ItemNotFound, UsageError
+from mapapi.history import change_kind
+from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.transaction import Op
+from mapapi.workspace import Workspace
+
+if TYPE_CHECKING:
+    from mapapi.history import CommitRecord, Revision
+    from mapapi.peer import Peer
+    from mapapi.store.base import IdKind
+    from mapapi.transaction import Change, Conflict
+    from mapapi.workspace import View
+
+Json = Any
+
+
+class Operations:
+    """The CLI's operations over one peer (see the module docstring)."""
+
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+        self.views = Workspace(peer)
+
+    # -- shapes ------------------------------------------------------------------
+    def _fields(self, table: str, data: bytes | None) -> Json:
+        return None if data is None else self.peer.table(table).data_to_dict(data)
+
+    def _revision(self, revision: Revision | None) -> Json:
+        if revision is None or revision.removed:
+            return None
+        return self._fields(revision.table, revision.data)
+
+    def _change(self, change: Change | None) -> Json:
+        if change is None or change.op is Op.REMOVE:
+            return None
+        return self._fields(change.table, change.data)
+
+    def conflict(self, c: Conflict) -> Json:
+        """One conflict: table, id, chunk and the base, ours and theirs fields."""
+        return {
+            "table": c.table,
+            "id": c.item_id,
+            "chunk": c.chunk_id,
+            "base": self._revision(c.base),
+            "ours": self._change(c.ours),
+            "theirs": self._revision(c.theirs),
+        }
+
+    @staticmethod
+    def commit_json(record: CommitRecord) -> Json:
+        """A commit record."""
+        return {
+            "commit": record.id,
+            "time": record.time,
+            "author": record.author,
+            "message": record.message,
+            "chunks": list(record.chunks),
+        }
+
+    @staticmethod
+    def view_json(view: View) -> Json:
+        """A view's name, begin time and counts."""
+        return {
+            "name": view.name,
+            "begin_time": view.begin_time,
+            "isolation": view.isolation,
+            "staged": len(view.changes),
+            "conflicts": len(view.conflicts),
+        }
+
+    # -- ids -------------------------------------------------------------------------
+    async def resolve_id(self, kind: IdKind, text: str) -> str:
+        """A full id from a full id or a unique prefix of 4+ hex digits."""
+        text = text.lower()
+        if len(text) == 32:
+            return text
+        if len(text) < 4 or any(c not in "0123456789abcdef" for c in text):
+            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
+        found = self.peer.store.resolve_prefix(kind, text)
+        if not found:
+            raise UsageError(f"no {kind} id starts with {text!r}")
+        if len(found) > 1:
+            raise UsageError(f"{kind} id prefix {text!r} is ambiguous; give more digits")
+        return found[0]
+
+    # -- tables and chunks -------------------------------------------------------------
+    async def table_create(self, name: str, type_name: str) -> Json:
+        """Create a table."""
+        descriptor = await self.peer.create_table(name, type_name)
+        return {"name": descriptor.name, "type": descriptor.type_name}
+
+    async def table_list(self) -> Json:
+        """Tables with chunk and item counts."""
+        chunks = self.peer.chunks()
+        return {
+            "tables": [
+                {
+                    "name": name,
+                    "type": type_name,
+                    "chunks": sum(1 for c in chunks if c.table == name),
+                    "items": sum(c.items for c in chunks if c.table == name),
+                }
+                for name, type_name in self.peer.store.tables().items()
+            ]
+        }
+
+    async def chunk_create(self, table: str) -> Json:
+        """Create a chunk."""
+        return {"id": await self.peer.create_chunk(table), "table": table}
+
+    async def chunk_list(self, table: str | None = None) -> Json:
+        """Chunks held here."""
+        return {
+            "chunks": [
+                {"id": c.id, "table": c.table, "items": c.items} for c in self.peer.chunks(table)
+            ]
+        }
+
+    # -- views ---------------------------------------------------------------------------
+    async def view_open(self, view: str, at: int | None = None, serializable: bool = False) -> Json:
+        """Begin a view."""
+        opened = self.views.open(view, at, "serializable" if serializable else "snapshot")
+        return self.view_json(opened)
+
+    async def view_abort(self, view: str) -> Json:
+        """Drop a view."""
+        self.views.abort(view)
+        return {"view": view}
+
+    async def view_list(self) -> Json:
+        """Every view."""
+        return {"views": [self.view_json(v) for v in self.views.views()]}
+
+    async def status(self, view: str) -> Json:
+        """A view's begin time, staged changes and conflicts."""
+        current = self.views.get(view)
+        return {
+            "view": view,
+            "open": current is not None,
+            "begin_time": current.begin_time if current else None,
+            "now": self.peer.now(),
+            "staged": [
+                {"op": c.op.name.lower(), "table": c.table, "id": c.item_id, "chunk": c.chunk_id}
+                for c in (current.changes if current else [])
+            ],
+            "conflicts": [c.item_id for c in (current.conflicts if current else [])],
+        }
+
+    async def set(
+        self, view: str, table: str, data: str, item: str | None = None, chunk: str | None = None
+    ) -> Json:
+        """Stage an insert (no item) or an update."""
+        item_id = ItemId(await self.resolve_id("item", item)) if item else None
+        chunk_id = ChunkId(await self.resolve_id("chunk", chunk)) if chunk else None
+        staged = self.views.stage_set(view, table, data, item_id, chunk_id)
+        return {"id": staged, "op": "update" if item_id else "insert"}
+
+    async def rm(self, view: str, table: str, item: str) -> Json:
+        """Stage a removal."""
+        item_id = ItemId(await self.resolve_id("item", item))
+        self.views.stage_remove(view, table, item_id)
+        return {"id": item_id, "op": "remove"}
+
+    async def get(self, view: str, table: str, item: str, at: int | None = None) -> Json:
+        """One item's fields as the view (or the map at `at`) sees it."""
+        item_id = ItemId(await self.resolve_id("item", item))
+        tx = self.views.reader(view, at)
+        message = await tx.get(table, item_id)
+        if message is None:
+            raise ItemNotFound(f"no item {item_id} in table {table!r} at time {tx.begin_time}")
+        return {
+            "id": item_id,
+            "time": tx.begin_time,
+            "data": self.peer.table(table).to_dict(message),
+        }
+
+    async def ls(
+        self, view: str, table: str, chunk: str | None = None, at: int | None = None
+    ) -> Json:
+        """The items of a table (or chunk) as the view sees them."""
+        chunk_id = ChunkId(await self.resolve_id("chunk", chunk)) if chunk else None
+        tx = self.views.reader(view, at)
+        descriptor = self.peer.table(table)
+        found = await tx.items(table, chunk_id)
+        return {
+            "time": tx.begin_time,
+            "items": [{"id": i, "data": descriptor.to_dict(m)} for i, m in found.items()],
+        }
+
+    async def commit(self, view: str, message: str = "") -> Json:
+        """Commit a view; raises ConflictError (the conflicts stay in the view)."""
+        record = await self.views.commit(view, message)
+        return self.commit_json(record) if record else {"commit": None}
+
+    async def diff(self, view: str) -> Json:
+        """Staged changes (with their base) and conflicts of a view."""
+        current = self.views.get(view)
+        changes, conflicts = [], []
+        if current is not None:
+            for ch in current.changes:
+                base = self.peer.read_local(ch.item_id, current.begin_time)
+                changes.append(
+                    {
+                        "table": ch.table,
+                        "id": ch.item_id,
+                        "chunk": ch.chunk_id,
+                        "op": ch.op.name.lower(),
+                        "base": self._revision(base),
+                        "ours": self._change(ch),
+                    }
+                )
+            conflicts = [self.conflict(c) for c in current.conflicts]
+        return {"view": view, "changes": changes, "conflicts": conflicts}
+
+    async def resolve(
+        self,
+        view: str,
+        side: str,
+        items: list[str] | None = None,
+        edited: dict[str, Json] | None = None,
+    ) -> Json:
+        """Settle conflicts with `side` ('ours' or 'theirs'), or edited fields per item."""
+        if side not in ("ours", "theirs"):
+            raise UsageError(f"side must be 'ours' or 'theirs', not {side!r}")
+        current = self.views.get(view)
+        conflicts = current.conflicts if current else []
+        if not conflicts:
+            raise UsageError(f"view {view!r} has no conflicts to resolve")
+        wanted = [_match(conflicts, text) for text in items or []]
+        payloads = {}
+        for text, fields in (edited or {}).items():
+            conflict = next(c for c in conflicts if c.item_id == _match(conflicts, text))
+            descriptor = self.peer.table(conflict.table)
+            payloads[conflict.item_id] = descriptor.encode(descriptor.from_json(json.dumps(fields)))
+        resolved = self.views.resolve(view, side, wanted, payloads)  # type: ignore[arg-type]
+        return {"resolved": resolved, "remaining": len(conflicts) - len(resolved)}
+
+    # -- history ---------------------------------------------------------------------
+    async def log(
+        self, table: str | None = None, item: str | None = None, limit: int | None = None
+    ) -> Json:
+        """Commits newest first (of a table), or one item's revisions newest first."""
+        peer = self.peer
+        if item is not None and table is not None:
+            item_id = ItemId(await self.resolve_id("item", item))
+            peer.table(table)
+            rows = []
+            for revision in reversed(peer.history(item_id)):
+                record = peer.commit_record(revision.commit_id)
+                rows.append(
+                    {
+                        "commit": revision.commit_id,
+                        "time": revision.update_time,
+                        "author": revision.author,
+                        "message": record.message if record else "",
+                        "data": self._revision(revision),
+                    }
+                )
+            return rows[:limit] if limit else rows
+        records = peer.log()
+        if table is not None:
+            chunks = {c.id for c in peer.chunks(table)}
+            records = [r for r in records if chunks & set(r.chunks)]
+        return [self.commit_json(r) for r in records[:limit]]
+
+    async def show(self, commit: str) -> Json:
+        """One commit with the revisions it wrote."""
+        commit_id = CommitId(await self.resolve_id("commit", commit))
+        record = self.peer.commit_record(commit_id)
+        if record is None:
+            raise UsageError(f"no commit {commit_id}")
+        changes = []
+        for revision in self.peer.commit_revisions(commit_id):
+            previous = self.peer.read_local(revision.item_id, revision.update_time - 1)
+            changes.append(
+                {
+                    "table": revision.table,
+                    "id": revision.item_id,
+                    "op": change_kind(revision, previous),
+                    "data": self._revision(revision),
+                }
+            )
+        return {**self.commit_json(record), "changes": changes}
+
+
+def _match(conflicts: list[Conflict], text: str) -> ItemId:
+    found = [c.item_id for c in conflicts if c.item_id.startswith(text.lower())]
+    if len(found) != 1:
+        raise UsageError(f"{text!r} names {len(found)} of the view's conflicts; give a unique id")
+    return found[0]

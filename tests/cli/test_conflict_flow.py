@@ -1,0 +1,309 @@
+"""The git-like conflict flow with two named views on one repository.
+
+Views `alice` and `bob` begin at the same time and change the same items;
+alice commits first, so bob's commit conflicts (exit 3) and keeps the
+conflicts in his view for `diff`, `resolve` and a second `commit`.
+"""
+
+from __future__ import annotations
+
+import json
+import types
+from typing import Any
+
+import click
+import pytest
+
+from mapapi import ConflictError, UnresolvedConflicts, UsageError, ViewClosedError
+from mapctl.commands import view as view_commands
+from tests.cli.conftest import Mapctl
+
+BASE = {"x": 1.0, "label": "dock"}
+ALICE = {"x": 2.0, "label": "dock"}
+BOB = {"x": 3.0, "label": "charger"}
+
+
+def _seed(points: Mapctl, *values: dict[str, Any]) -> list[str]:
+    """Commit items, then open both views at the same time."""
+    ids = [points.insert(v) for v in values]
+    points.commit("seed")
+    points("view", "open", view="alice")
+    points("view", "open", view="bob")
+    return ids
+
+
+def _conflict(points: Mapctl, *values: dict[str, Any]) -> list[str]:
+    """Both views update every seeded item; alice commits, bob's commit conflicts."""
+    ids = _seed(points, *values)
+    for item in ids:
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points("set", "pts", item, json.dumps(BOB), view="bob")
+    points.commit("alice", view="alice")
+    result = points.invoke("commit", "-m", "bob", view="bob")
+    assert isinstance(result.exception, ConflictError)
+    return ids
+
+
+class TestFailedCommit:
+    def test_second_commit_exits_3_and_prints_conflicts(self, points: Mapctl) -> None:
+        (item,) = _seed(points, BASE)
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points("set", "pts", item, json.dumps(BOB), view="bob")
+        assert points.commit("alice", view="alice")["commit"]
+        outcome = points.main("commit", "-m", "bob", "--json", view="bob")
+        assert outcome.code == 3
+        assert json.loads(outcome.out) == {
+            "conflicts": [
+                {
+                    "table": "pts",
+                    "id": item,
+                    "chunk": points.json("chunk", "list")["chunks"][0]["id"],
+                    "base": BASE,
+                    "ours": BOB,
+                    "theirs": ALICE,
+                }
+            ]
+        }
+        assert outcome.err_lines == [
+            "error: 1 conflicting item(s); run `mapctl diff` and `mapctl resolve`, "
+            "then commit again"
+        ]
+
+    def test_diff_json_shows_base_ours_theirs(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        diff = points.json("diff", view="bob")
+        assert diff["view"] == "bob"
+        assert diff["changes"] == []
+        (conflict,) = diff["conflicts"]
+        assert (conflict["table"], conflict["id"]) == ("pts", item)
+        assert (conflict["base"], conflict["ours"], conflict["theirs"]) == (BASE, BOB, ALICE)
+        status = points.json("status", view="bob")
+        assert status["conflicts"] == [item]
+        assert points.json("view", "list")["views"][0]["conflicts"] == 1
+        assert "1 unresolved conflict(s): run `mapctl diff`" in points("status", view="bob")
+
+    def test_diff_plain_renders_the_conflict(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        out = points("diff", view="bob")
+        assert f"conflict pts {item}" in out
+        for word in ("base", "ours", "theirs", "charger"):
+            assert word in out
+
+    def test_commit_refuses_until_resolved(self, points: Mapctl) -> None:
+        _conflict(points, BASE)
+        outcome = points.main("commit", view="bob")
+        assert outcome.code == 3
+        assert "mapctl resolve" in outcome.err
+        assert isinstance(points.invoke("commit", view="bob").exception, UnresolvedConflicts)
+
+    def test_the_view_begins_again_after_the_conflict(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        assert points.json("status", view="bob")["begin_time"] == 2
+        assert points.json("get", "pts", item, view="bob") == ALICE  # theirs, until resolved
+
+    def test_abort_drops_the_conflicts(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        points("view", "abort", view="bob")
+        assert points.json("view", "list")["views"] == []
+        assert points.json("get", "pts", item) == ALICE
+
+
+class TestResolve:
+    def test_ours_then_commit_keeps_ours(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        assert points.json("resolve", "--ours", view="bob") == {"resolved": [item], "remaining": 0}
+        assert points.json("diff", view="bob")["conflicts"] == []
+        record = points.commit("bob again", view="bob")
+        assert record["commit"]
+        assert points.json("get", "pts", item) == BOB
+        assert points.json("view", "list")["views"] == []
+
+    def test_theirs_then_commit_keeps_theirs(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        assert "resolved 1 conflict(s); 0 left" in points("resolve", "--theirs", view="bob")
+        assert points.json("status", view="bob")["staged"] == []
+        assert points.commit("bob again", view="bob") == {"commit": None}  # nothing to write
+        assert points.json("get", "pts", item) == ALICE
+        assert points.json("view", "list")["views"] == []
+        assert [c["message"] for c in points.json("log")] == ["alice", "seed"]
+
+    def test_resolve_one_of_two_leaves_one(self, points: Mapctl) -> None:
+        first, second = _conflict(points, BASE, {"x": 10.0})
+        assert len(points.json("diff", view="bob")["conflicts"]) == 2
+        resolved = points.json("resolve", "--ours", first[:6], view="bob")
+        assert resolved == {"resolved": [first], "remaining": 1}
+        assert [c["id"] for c in points.json("diff", view="bob")["conflicts"]] == [second]
+        assert points.main("commit", view="bob").code == 3
+        points("resolve", "--theirs", second, view="bob")
+        points.commit(view="bob")
+        assert points.json("get", "pts", first) == BOB
+        assert points.json("get", "pts", second) == ALICE
+
+    def test_resolve_an_id_without_conflict(self, points: Mapctl) -> None:
+        _conflict(points, BASE)
+        result = points.invoke("resolve", "--ours", "ffff", view="bob")
+        assert isinstance(result.exception, UsageError)
+        assert "0 of the view's conflicts" in str(result.exception)
+
+    def test_resolve_without_conflicts(self, points: Mapctl) -> None:
+        points.insert({"x": 1})
+        result = points.invoke("resolve", "--ours")
+        assert isinstance(result.exception, ViewClosedError)
+
+    def test_staged_changes_survive_the_failed_commit(self, points: Mapctl) -> None:
+        item, other = _seed(points, BASE, {"y": 1.0})
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points.commit(view="alice")
+        points("set", "pts", item, json.dumps(BOB), view="bob")
+        points("set", "pts", other, '{"y": 2.0}', view="bob")
+        points("rm", "pts", other, view="bob")
+        added = points.insert({"z": 1.0}, view="bob")
+        assert isinstance(points.invoke("commit", view="bob").exception, ConflictError)
+        staged = points.json("status", view="bob")["staged"]
+        assert [(s["op"], s["id"]) for s in staged] == [("remove", other), ("insert", added)]
+        changes = points.json("diff", view="bob")["changes"]
+        assert [(c["op"], c["base"], c["ours"]) for c in changes] == [
+            ("remove", {"y": 1.0}, None),
+            ("insert", None, {"z": 1.0}),
+        ]
+        points("resolve", "--ours", view="bob")
+        record = points.commit("bob", view="bob")
+        shown = points.json("show", record["commit"])
+        assert sorted((c["op"], c["id"]) for c in shown["changes"]) == sorted(
+            [("updated", item), ("removed", other), ("inserted", added)]
+        )
+        assert points.json("get", "pts", added) == {"z": 1.0}
+        assert sorted(r["id"] for r in points.json("ls", "pts")["items"]) == sorted([item, added])
+
+
+class TestRemoveVersusUpdate:
+    def test_they_removed_we_updated(self, points: Mapctl) -> None:
+        (item,) = _seed(points, BASE)
+        points("rm", "pts", item, view="alice")
+        points.commit("alice removes", view="alice")
+        points("set", "pts", item, json.dumps(BOB), view="bob")
+        outcome = points.main("commit", "--json", view="bob")
+        assert outcome.code == 3
+        (conflict,) = json.loads(outcome.out)["conflicts"]
+        assert (conflict["base"], conflict["ours"], conflict["theirs"]) == (BASE, BOB, None)
+        (shown,) = points.json("diff", view="bob")["conflicts"]
+        assert shown["theirs"] is None
+        points("resolve", "--ours", view="bob")
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == BOB
+
+    def test_we_removed_they_updated(self, points: Mapctl) -> None:
+        (item,) = _seed(points, BASE)
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points.commit(view="alice")
+        points("rm", "pts", item, view="bob")
+        assert isinstance(points.invoke("commit", view="bob").exception, ConflictError)
+        (conflict,) = points.json("diff", view="bob")["conflicts"]
+        assert (conflict["base"], conflict["ours"], conflict["theirs"]) == (BASE, None, ALICE)
+        points("resolve", "--ours", view="bob")
+        points.commit(view="bob")
+        assert points.json("ls", "pts") == {"items": []}
+
+    def test_we_removed_they_updated_keep_theirs(self, points: Mapctl) -> None:
+        (item,) = _seed(points, BASE)
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points.commit(view="alice")
+        points("rm", "pts", item, view="bob")
+        points.invoke("commit", view="bob")
+        points("resolve", "--theirs", view="bob")
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == ALICE
+
+
+class _Terminal:
+    """Stands in for `sys` inside `mapctl.commands.view`: stdin is a terminal."""
+
+    stdin = types.SimpleNamespace(isatty=lambda: True)
+
+
+class TestInteractiveResolve:
+    def test_no_terminal_and_no_flag_is_a_usage_error(self, points: Mapctl) -> None:
+        _conflict(points, BASE)
+        result = points.invoke("resolve", view="bob", input="o\n")
+        assert isinstance(result.exception, UsageError)
+        outcome = points.main("resolve", view="bob", input="o\n")
+        assert outcome.code == 2
+        assert len(outcome.err_lines) == 1
+        assert "--ours" in outcome.err
+        assert "--theirs" in outcome.err
+        assert len(points.json("diff", view="bob")["conflicts"]) == 1
+
+    @pytest.fixture
+    def tty(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch.setattr(view_commands, "sys", _Terminal)
+
+    @pytest.mark.usefixtures("tty")
+    @pytest.mark.parametrize(("answer", "expected"), [("o", BOB), ("t", ALICE)])
+    def test_ours_or_theirs(self, points: Mapctl, answer: str, expected: dict[str, Any]) -> None:
+        (item,) = _conflict(points, BASE)
+        out = points("resolve", view="bob", input=f"{answer}\n")
+        assert "keep [o]urs, [t]heirs, [e]dit, [s]kip" in out
+        assert "resolved 1 conflict(s); 0 left" in out
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == expected
+
+    @pytest.mark.usefixtures("tty")
+    def test_skip_leaves_the_conflict(self, points: Mapctl) -> None:
+        first, second = _conflict(points, BASE, {"x": 10.0})
+        out = points("resolve", view="bob", input="s\nt\n")
+        assert "resolved 1 conflict(s); 1 left" in out
+        assert [c["id"] for c in points.json("diff", view="bob")["conflicts"]] == [first]
+        assert points.json("get", "pts", second, view="bob") == ALICE
+
+    @pytest.mark.usefixtures("tty")
+    def test_only_the_ids_given_are_asked(self, points: Mapctl) -> None:
+        _first, second = _conflict(points, BASE, {"x": 10.0})
+        out = points("resolve", second, view="bob", input="o\n")
+        assert out.count("keep [o]urs") == 1
+        assert points.json("resolve", "--theirs", view="bob")["remaining"] == 0
+
+    @pytest.mark.usefixtures("tty")
+    def test_edit_in_the_editor(self, points: Mapctl, monkeypatch: pytest.MonkeyPatch) -> None:
+        (item,) = _conflict(points, BASE)
+        seen: list[str] = []
+
+        def edit(text: str, extension: str = ".txt") -> str:
+            seen.append(text)
+            assert extension == ".json"
+            return json.dumps({"x": 4.0, "label": "merged"})
+
+        monkeypatch.setattr(click, "edit", edit)
+        points("resolve", view="bob", input="e\n")
+        assert json.loads(seen[0]) == BOB  # the editor starts from ours
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == {"label": "merged", "x": 4.0}
+
+    @pytest.mark.usefixtures("tty")
+    def test_edit_closed_without_saving_skips(
+        self, points: Mapctl, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        _conflict(points, BASE)
+        monkeypatch.setattr(click, "edit", lambda text, extension=".txt": None)
+        assert "resolved 0 conflict(s); 1 left" in points("resolve", view="bob", input="e\n")
+        assert len(points.json("diff", view="bob")["conflicts"]) == 1
+
+    @pytest.mark.usefixtures("tty")
+    def test_edit_of_a_removal_starts_from_theirs(
+        self, points: Mapctl, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        (item,) = _seed(points, BASE)
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points.commit(view="alice")
+        points("rm", "pts", item, view="bob")
+        points.invoke("commit", view="bob")
+        seen: list[str] = []
+
+        def edit(text: str, extension: str = ".txt") -> str:
+            seen.append(text)
+            return text
+
+        monkeypatch.setattr(click, "edit", edit)
+        points("resolve", view="bob", input="e\n")
+        assert json.loads(seen[0]) == ALICE
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == ALICE

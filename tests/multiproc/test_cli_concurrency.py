@@ -1,0 +1,87 @@
+"""Three `mapctl` processes increment one counter through the CLI's view loop.
+
+Each worker owns a named view and loops `view open` -> `get --json` -> `set` ->
+`commit`; a commit that exits 3 (conflict) is followed by `view abort` and a
+retry. No increment may be lost: the final value is a0 + 3*K and the log has
+exactly 1 + 3*K commits (paper Algorithm 1 over the CLI, DESIGN §9).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+WORKERS, K, A0 = 3, 10, 5
+EXIT_CONFLICT = 3
+COMMAND_TIMEOUT = 30.0
+
+pytestmark = pytest.mark.slow
+
+
+def mapctl_path() -> str:
+    found = shutil.which("mapctl", path=str(Path(sys.executable).parent)) or shutil.which("mapctl")
+    assert found, "mapctl is not installed next to the test interpreter"
+    return found
+
+
+MAPCTL = mapctl_path()
+
+
+def mapctl(repo: Path, *args: str, view: str = "main", ok: tuple[int, ...] = (0,)) -> Any:
+    """Run one `mapctl -C repo --view VIEW ...`; the completed process (checked against `ok`)."""
+    done = subprocess.run(
+        [MAPCTL, "-C", str(repo), "--view", view, *args],
+        capture_output=True,
+        text=True,
+        timeout=COMMAND_TIMEOUT,
+        check=False,
+    )
+    assert done.returncode in ok, f"mapctl {' '.join(args)} exited {done.returncode}: {done.stderr}"
+    return done
+
+
+def increment(repo: Path, view: str, item_id: str) -> int:
+    """One increment through the CLI, retried on conflict; returns the conflicts seen."""
+    conflicts = 0
+    while True:
+        mapctl(repo, "view", "open", view=view)
+        fields = json.loads(mapctl(repo, "get", "counters", item_id, "--json", view=view).stdout)
+        value = int(fields.get("value", 0)) + 1  # int64 is a JSON string; 0 is omitted
+        data = json.dumps({"name": fields["name"], "value": value})
+        mapctl(repo, "set", "counters", item_id, data, view=view)
+        done = mapctl(repo, "commit", "-m", f"{view} -> {value}", view=view, ok=(0, EXIT_CONFLICT))
+        if done.returncode == 0:
+            return conflicts
+        conflicts += 1
+        mapctl(repo, "view", "abort", view=view)
+
+
+def test_three_cli_processes_lose_no_increment(tmp_path: Path) -> None:
+    repo = tmp_path / "repo"
+    subprocess.run([MAPCTL, "init", str(repo)], check=True, timeout=COMMAND_TIMEOUT)
+    mapctl(repo, "table", "create", "counters", "--type", "mapapi.v1.Counter")
+    mapctl(repo, "chunk", "create", "counters")
+    created = mapctl(repo, "set", "counters", json.dumps({"name": "c", "value": A0}), "--json")
+    item_id = json.loads(created.stdout)["id"]
+    mapctl(repo, "commit", "-m", "insert c")
+
+    def worker(index: int) -> int:
+        return sum(increment(repo, f"p{index}", item_id) for _ in range(K))
+
+    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        futures = [pool.submit(worker, i) for i in range(WORKERS)]
+        for future in futures:
+            future.result(timeout=WORKERS * K * 4 * COMMAND_TIMEOUT)
+
+    final = json.loads(mapctl(repo, "get", "counters", item_id, "--json").stdout)
+    assert int(final["value"]) == A0 + WORKERS * K
+    log = json.loads(mapctl(repo, "log", "--json").stdout)
+    assert len(log) == 1 + WORKERS * K
+    assert json.loads(mapctl(repo, "view", "list", "--json").stdout) == {"views": []}
