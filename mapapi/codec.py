@@ -13,6 +13,7 @@ from mapapi.errors import CorruptRepoError
 from mapapi.history import Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.transaction import Change, Conflict, Op
+from mapapi.view import View
 
 _GENERATED = (core_pb2, types_pb2)
 
@@ -77,32 +78,32 @@ def change_from_pb(m: core_pb2.Change) -> Change:
     )
 
 
-def encode_view(
-    name: str, begin_time: int, isolation: str, changes: list[Change], conflicts: list[Conflict]
-) -> bytes:
+def encode_view(view: View) -> bytes:
     """Serialize a CLI view (a transaction kept between commands)."""
-    view = core_pb2.ViewState(name=name, begin_time=begin_time, isolation=isolation)
-    view.changes.extend(change_to_pb(c) for c in changes)
-    for c in conflicts:
-        entry = view.conflicts.add(table=c.table, item_id=c.item_id.to_bytes())
+    state = core_pb2.ViewState(name=view.name, begin_time=view.begin_time, isolation=view.isolation)
+    state.changes.extend(change_to_pb(c) for c in view.changes)
+    for c in view.conflicts:
+        entry = state.conflicts.add(table=c.table, item_id=c.item_id.to_bytes())
         entry.theirs.CopyFrom(revision_to_pb(c.theirs))
         if c.base is not None:
             entry.base.CopyFrom(revision_to_pb(c.base))
         if c.ours is not None:
             entry.ours.CopyFrom(change_to_pb(c.ours))
-    return bytes(view.SerializeToString())
+    state.read_set.extend(i.to_bytes() for i in sorted(view.read_set))
+    for table, chunk in sorted(view.scopes, key=lambda s: (s[0], s[1] or "")):
+        state.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
+    return bytes(state.SerializeToString())
 
 
-def decode_view(blob: bytes) -> tuple[str, int, str, list[Change], list[Conflict]]:
-    """The fields of a serialized view: name, begin time, isolation, changes, conflicts.
+def decode_view(blob: bytes) -> View:
+    """A view from its serialized form.
 
     Raises:
         CorruptRepoError: the stored view does not parse.
     """
-    view = core_pb2.ViewState()
+    state = core_pb2.ViewState()
     try:
-        view.ParseFromString(blob)
-        changes = [change_from_pb(c) for c in view.changes]
+        state.ParseFromString(blob)
         conflicts = [
             Conflict(
                 c.table,
@@ -112,8 +113,16 @@ def decode_view(blob: bytes) -> tuple[str, int, str, list[Change], list[Conflict
                 change_from_pb(c.ours) if c.HasField("ours") else None,
                 revision_from_pb(c.theirs),
             )
-            for c in view.conflicts
+            for c in state.conflicts
         ]
+        return View(
+            state.name,
+            state.begin_time,
+            "serializable" if state.isolation == "serializable" else "snapshot",
+            [change_from_pb(c) for c in state.changes],
+            conflicts,
+            {ItemId.from_bytes(i) for i in state.read_set},
+            {(s.table, ChunkId.from_bytes(s.chunk) if s.chunk else None) for s in state.scopes},
+        )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc
-    return view.name, view.begin_time, view.isolation, changes, conflicts

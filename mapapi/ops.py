@@ -9,6 +9,7 @@ Errors are `MapError`s, which travel as (code, message) over the endpoint.
 
 from __future__ import annotations
 
+import inspect
 import json
 from typing import TYPE_CHECKING, Any
 
@@ -34,6 +35,21 @@ class Operations:
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
         self.views = Workspace(peer)
+
+    async def call(self, op: str, args: dict[str, Json]) -> Json:
+        """Run the operation called `op` with keyword `args` (JSON in, JSON out).
+
+        Raises:
+            UsageError: no such operation, or arguments that do not fit it.
+        """
+        method = getattr(self, op, None) if op in OPERATIONS else None
+        if method is None:
+            raise UsageError(f"unknown operation {op!r}")
+        try:
+            inspect.signature(method).bind(**args)
+        except TypeError as exc:
+            raise UsageError(f"bad arguments for {op!r}: {exc}") from exc
+        return await method(**args)
 
     # -- shapes ------------------------------------------------------------------
     def _fields(self, table: str, data: bytes | None) -> Json:
@@ -86,10 +102,10 @@ class Operations:
     async def resolve_id(self, kind: IdKind, text: str) -> str:
         """A full id from a full id or a unique prefix of 4+ hex digits."""
         text = text.lower()
+        if not 4 <= len(text) <= 32 or any(c not in "0123456789abcdef" for c in text):
+            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
         if len(text) == 32:
             return text
-        if len(text) < 4 or any(c not in "0123456789abcdef" for c in text):
-            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
         found = self.peer.store.resolve_prefix(kind, text)
         if not found:
             raise UsageError(f"no {kind} id starts with {text!r}")
@@ -180,8 +196,13 @@ class Operations:
         item_id = ItemId(await self.resolve_id("item", item))
         tx = self.views.reader(view, at)
         message = await tx.get(table, item_id)
+        if at is None:
+            self.views.remember_reads(view, tx)
         if message is None:
-            raise ItemNotFound(f"no item {item_id} in table {table!r} at time {tx.begin_time}")
+            raise ItemNotFound(
+                f"no item {item_id} in table {table!r} at time {tx.begin_time}; "
+                f"`mapctl ls {table}` lists the items"
+            )
         return {
             "id": item_id,
             "time": tx.begin_time,
@@ -196,6 +217,8 @@ class Operations:
         tx = self.views.reader(view, at)
         descriptor = self.peer.table(table)
         found = await tx.items(table, chunk_id)
+        if at is None:
+            self.views.remember_reads(view, tx)
         return {
             "time": tx.begin_time,
             "items": [{"id": i, "data": descriptor.to_dict(m)} for i, m in found.items()],
@@ -225,6 +248,11 @@ class Operations:
                 )
             conflicts = [self.conflict(c) for c in current.conflicts]
         return {"view": view, "changes": changes, "conflicts": conflicts}
+
+    async def match_conflict(self, view: str, text: str) -> Json:
+        """The full item id of the view's one conflict whose id starts with `text`."""
+        current = self.views.get(view)
+        return _match(current.conflicts if current else [], text)
 
     async def resolve(
         self,
@@ -282,7 +310,7 @@ class Operations:
         commit_id = CommitId(await self.resolve_id("commit", commit))
         record = self.peer.commit_record(commit_id)
         if record is None:
-            raise UsageError(f"no commit {commit_id}")
+            raise UsageError(f"no commit {commit_id}; `mapctl log` lists the commits")
         changes = []
         for revision in self.peer.commit_revisions(commit_id):
             previous = self.peer.read_local(revision.item_id, revision.update_time - 1)
@@ -295,6 +323,13 @@ class Operations:
                 }
             )
         return {**self.commit_json(record), "changes": changes}
+
+
+OPERATIONS = frozenset(
+    name
+    for name, value in vars(Operations).items()
+    if not name.startswith("_") and name != "call" and inspect.iscoroutinefunction(value)
+)
 
 
 def _match(conflicts: list[Conflict], text: str) -> ItemId:

@@ -260,6 +260,13 @@ class Transaction:
         """(table, chunk or None) ranges scanned by `items`/`find`."""
         return set(self._scopes)
 
+    def note_reads(
+        self, read_set: Iterable[ItemId], scopes: Iterable[tuple[str, ChunkId | None]]
+    ) -> None:
+        """Count reads made elsewhere (an earlier command of a CLI view) as ours."""
+        self._read_set.update(read_set)
+        self._scopes.update(scopes)
+
     def since(self, item_id: ItemId) -> int:
         """The time after which a foreign write to `item_id` conflicts with us."""
         own = self._own.get(item_id)

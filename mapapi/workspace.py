@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from typing import Literal
 
 from mapapi import codec
@@ -21,20 +20,10 @@ from mapapi.history import CommitRecord
 from mapapi.ids import ChunkId, ItemId
 from mapapi.peer import Peer
 from mapapi.transaction import Change, Conflict, Isolation, Op, Transaction
+from mapapi.view import View
 
 DEFAULT_VIEW = "main"
 Side = Literal["ours", "theirs"]
-
-
-@dataclass
-class View:
-    """A persisted transaction: begin time, staged changes, open conflicts."""
-
-    name: str
-    begin_time: int
-    isolation: Isolation = "snapshot"
-    changes: list[Change] = field(default_factory=list)
-    conflicts: list[Conflict] = field(default_factory=list)
 
 
 class Workspace:
@@ -49,15 +38,10 @@ class Workspace:
         blob = self.peer.store.load_view(name)
         if blob is None:
             return None
-        _, begin, isolation, changes, conflicts = codec.decode_view(blob)
-        iso: Isolation = "serializable" if isolation == "serializable" else "snapshot"
-        return View(name, begin, iso, changes, conflicts)
+        return codec.decode_view(blob)
 
     def _save(self, view: View) -> None:
-        blob = codec.encode_view(
-            view.name, view.begin_time, view.isolation, view.changes, view.conflicts
-        )
-        self.peer.store.save_view(view.name, blob)
+        self.peer.store.save_view(view.name, codec.encode_view(view))
 
     @contextmanager
     def _editing(self, name: str, *, create: bool = True) -> Iterator[View]:
@@ -105,12 +89,24 @@ class Workspace:
         tx = Transaction(self.peer, view.begin_time, self.peer.id, isolation=view.isolation)
         for change in view.changes:
             tx.stage(change)
+        tx.note_reads(view.read_set, view.scopes)
         return tx
 
     def reader(self, name: str, at: int | None = None) -> Transaction:
         """What `get`/`ls` read through: the view if open (and no `at`), else the map."""
         view = self.get(name) if at is None else None
         return self.transaction(view) if view is not None else self.peer.begin(at)
+
+    def remember_reads(self, name: str, tx: Transaction) -> None:
+        """Keep what `tx` read in view `name`, if it is an open serializable view,
+        so the commit validates reads made by earlier commands too."""
+        with self.peer.store.exclusive():
+            view = self.get(name)
+            if view is None or view.isolation != "serializable":
+                return
+            view.read_set |= tx.read_set
+            view.scopes |= tx.scopes
+            self._save(view)
 
     def stage_set(
         self, name: str, table: str, data: str, item_id: ItemId | None, chunk: ChunkId | None
@@ -180,6 +176,7 @@ class Workspace:
                 failure = err
                 merged = err.merge()
                 view.begin_time, view.changes = merged.begin_time, merged.changes
+                view.read_set, view.scopes = set(), set()  # reads were of the old snapshot
                 view.conflicts = err.conflicts
                 self._save(view)
             else:

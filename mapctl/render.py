@@ -42,6 +42,11 @@ def table(title: str, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> 
     console.print(grid)
 
 
+def records(title: str, rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> None:
+    """A table of JSON records, one column per key in `columns`."""
+    table(title, [c.replace("_", " ") for c in columns], [[r[c] for c in columns] for r in rows])
+
+
 def pretty_json(value: Any) -> None:
     """A JSON value, indented and coloured for humans."""
     from rich.json import JSON

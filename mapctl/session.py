@@ -1,73 +1,50 @@
-"""`Session`: what every command shares (repo path, view, the opened peer)."""
+"""`Session`: what every command shares (repo path, view, the operations)."""
 
 from __future__ import annotations
 
-from collections.abc import Coroutine
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 import click
 
 if TYPE_CHECKING:
-    from mapapi import Peer
-    from mapapi.store.base import IdKind
-    from mapapi.workspace import Workspace
-
-T = TypeVar("T")
+    from mapapi.ops import Operations
 
 
 class Session:
-    """Opens the repository lazily and closes it when the command ends."""
+    """Opens the repository lazily and closes it when the command ends.
+
+    Commands call `call(op, **args)`: one JSON operation of `mapapi.ops`,
+    run on the repository's embedded peer.
+    """
 
     def __init__(self, path: Path, view: str, verbose: bool) -> None:
         self.path = path
         self.view = view
         self.verbose = verbose
-        self._peer: Peer | None = None
+        self._ops: Operations | None = None
 
     @property
-    def peer(self) -> Peer:
-        """The repository's peer (opened on first use)."""
-        if self._peer is None:
+    def ops(self) -> Operations:
+        """The operations over the repository's peer (opened on first use)."""
+        if self._ops is None:
             from mapapi import Peer
+            from mapapi.ops import Operations
 
-            self._peer = Peer.open(self.path)
-        return self._peer
+            self._ops = Operations(Peer.open(self.path))
+        return self._ops
 
-    @property
-    def workspace(self) -> Workspace:
-        """The repository's named views."""
-        from mapapi.workspace import Workspace
-
-        return Workspace(self.peer)
-
-    def run(self, coro: Coroutine[Any, Any, T]) -> T:
-        """Run one library coroutine to completion."""
+    def call(self, op: str, **args: Any) -> Any:
+        """Run one operation to completion and return its JSON result."""
         import asyncio  # here, not at the top: `mapctl --help` never needs it
 
-        return asyncio.run(coro)
-
-    def resolve_id(self, kind: IdKind, text: str) -> str:
-        """A full id from a full id or a unique prefix (like a short git hash)."""
-        from mapapi.errors import UsageError
-
-        text = text.lower()
-        if not 4 <= len(text) <= 32 or any(c not in "0123456789abcdef" for c in text):
-            raise UsageError(f"bad {kind} id {text!r}: give 32 hex digits or a prefix of 4 or more")
-        if len(text) == 32:
-            return text
-        found = self.peer.store.resolve_prefix(kind, text)
-        if not found:
-            raise UsageError(f"no {kind} id starts with {text!r}")
-        if len(found) > 1:
-            raise UsageError(f"{kind} id prefix {text!r} is ambiguous; give more digits")
-        return found[0]
+        return asyncio.run(self.ops.call(op, args))
 
     def close(self) -> None:
         """Release the repository."""
-        if self._peer is not None:
-            self._peer.store.close()
-            self._peer = None
+        if self._ops is not None:
+            self._ops.peer.store.close()
+            self._ops = None
 
 
 pass_session = click.make_pass_decorator(Session)

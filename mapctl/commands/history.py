@@ -3,10 +3,22 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import click
 
 from mapctl.session import Session, json_option, pass_session
+
+
+def _cell(key: str, value: Any) -> Any:
+    """How a log column reads for humans: short ids, JSON data, chunk counts."""
+    if key in ("commit", "author"):
+        return value[:8]
+    if key == "data":
+        return json.dumps(value)
+    if key == "chunks":
+        return len(value)
+    return value
 
 
 @click.command("log")
@@ -19,54 +31,15 @@ def log(
     session: Session, table_name: str | None, item: str | None, limit: int | None, as_json: bool
 ) -> None:
     """Show commits (newest first), those touching TABLE, or one item's revisions."""
-    from mapapi import ItemId
-    from mapctl import render, shape
+    from mapctl import render
 
-    peer = session.peer
-    if item is not None and table_name is not None:
-        item_id = ItemId(session.resolve_id("item", item))
-        peer.table(table_name)
-        rows = []
-        for revision in reversed(peer.history(item_id)):
-            record = peer.commit_record(revision.commit_id)
-            rows.append(
-                {
-                    "commit": revision.commit_id,
-                    "time": revision.update_time,
-                    "author": revision.author,
-                    "message": record.message if record else "",
-                    "data": shape.revision_fields(peer, revision),
-                }
-            )
-        rows = rows[:limit] if limit else rows
-        columns = ["commit", "time", "author", "message", "data"]
-    else:
-        records = peer.log()
-        if table_name is not None:
-            chunks = {c.id for c in peer.chunks(table_name)}
-            records = [r for r in records if chunks & set(r.chunks)]
-        rows = [shape.commit(r) for r in records[:limit]]
-        columns = ["commit", "time", "author", "message", "chunks"]
+    rows = session.call("log", table=table_name, item=item, limit=limit)
     if as_json:
         render.emit_json(rows)
         return
-    render.table(
-        "log",
-        columns,
-        [
-            [
-                v[:8]
-                if k in ("commit", "author")
-                else json.dumps(v)
-                if k == "data"
-                else len(v)
-                if k == "chunks"
-                else v
-                for k, v in r.items()
-            ]
-            for r in rows
-        ],
-    )
+    last = "data" if item is not None else "chunks"
+    columns = ["commit", "time", "author", "message", last]
+    render.table("log", columns, [[_cell(k, r[k]) for k in columns] for r in rows])
 
 
 @click.command("show")
@@ -75,36 +48,18 @@ def log(
 @pass_session
 def show(session: Session, commit_ref: str, as_json: bool) -> None:
     """Show one commit and the revisions it wrote."""
-    from mapapi import CommitId, UsageError
-    from mapapi.history import change_kind
-    from mapctl import render, shape
+    from mapctl import render
 
-    peer = session.peer
-    commit_id = CommitId(session.resolve_id("commit", commit_ref))
-    record = peer.commit_record(commit_id)
-    if record is None:
-        raise UsageError(f"no commit {commit_id}; `mapctl log` lists the commits")
-    changes = []
-    for revision in peer.commit_revisions(commit_id):
-        previous = peer.read_local(revision.item_id, revision.update_time - 1)
-        changes.append(
-            {
-                "table": revision.table,
-                "id": revision.item_id,
-                "op": change_kind(revision, previous),
-                "data": shape.revision_fields(peer, revision),
-            }
-        )
-    info = {**shape.commit(record), "changes": changes}
+    info = session.call("show", commit=commit_ref)
     if as_json:
         render.emit_json(info)
         return
-    render.line(f"commit {record.id}  time {record.time}  author {record.author}", "bold")
-    render.line(f"    {record.message or '(no message)'}")
+    render.line(f"commit {info['commit']}  time {info['time']}  author {info['author']}", "bold")
+    render.line(f"    {info['message'] or '(no message)'}")
     render.table(
         "changes",
         ["op", "table", "id", "data"],
-        [(c["op"], c["table"], c["id"], json.dumps(c["data"])) for c in changes],
+        [(c["op"], c["table"], c["id"], json.dumps(c["data"])) for c in info["changes"]],
     )
 
 

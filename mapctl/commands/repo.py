@@ -45,11 +45,11 @@ def table_create(session: Session, name: str, type_name: str, as_json: bool) -> 
     """Create table NAME holding messages of --type."""
     from mapctl import render
 
-    descriptor = session.run(session.peer.create_table(name, type_name))
+    info = session.call("table_create", name=name, type_name=type_name)
     if as_json:
-        render.emit_json({"name": descriptor.name, "type": descriptor.type_name})
+        render.emit_json(info)
     else:
-        render.line(f"created table {descriptor.name} ({descriptor.type_name})")
+        render.line(f"created table {info['name']} ({info['type']})")
 
 
 @table.command("list")
@@ -59,20 +59,11 @@ def table_list(session: Session, as_json: bool) -> None:
     """List the tables with their chunk and item counts."""
     from mapctl import render
 
-    chunks = session.peer.chunks()
-    rows = [
-        {
-            "name": name,
-            "type": type_name,
-            "chunks": sum(1 for c in chunks if c.table == name),
-            "items": sum(c.items for c in chunks if c.table == name),
-        }
-        for name, type_name in session.peer.store.tables().items()
-    ]
+    info = session.call("table_list")
     if as_json:
-        render.emit_json({"tables": rows})
+        render.emit_json(info)
     else:
-        render.table("tables", ["name", "type", "chunks", "items"], [r.values() for r in rows])
+        render.records("tables", info["tables"], ["name", "type", "chunks", "items"])
 
 
 @click.group("chunk")
@@ -88,11 +79,11 @@ def chunk_create(session: Session, table_name: str, as_json: bool) -> None:
     """Create an empty chunk of TABLE held by this peer."""
     from mapctl import render
 
-    chunk_id = session.run(session.peer.create_chunk(table_name))
+    info = session.call("chunk_create", table=table_name)
     if as_json:
-        render.emit_json({"id": chunk_id, "table": table_name})
+        render.emit_json(info)
     else:
-        render.line(chunk_id)
+        render.line(info["id"])
 
 
 @chunk.command("list")
@@ -103,13 +94,11 @@ def chunk_list(session: Session, table_name: str | None, as_json: bool) -> None:
     """List the chunks this peer holds."""
     from mapctl import render
 
-    rows = [
-        {"id": c.id, "table": c.table, "items": c.items} for c in session.peer.chunks(table_name)
-    ]
+    info = session.call("chunk_list", table=table_name)
     if as_json:
-        render.emit_json({"chunks": rows})
+        render.emit_json(info)
     else:
-        render.table("chunks", ["id", "table", "items"], [r.values() for r in rows])
+        render.records("chunks", info["chunks"], ["id", "table", "items"])
 
 
 def register(cli: click.Group) -> None:

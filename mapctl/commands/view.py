@@ -1,18 +1,17 @@
-"""Views and staging: `view ...`, `status`, `set`, `get`, `ls`, `rm`, `commit`, `diff`,
-`resolve`."""
+"""Views and staging: `view ...`, `status`, `set`, `get`, `ls`, `rm`.
+
+Plus `commit`, `diff` and `resolve`.
+"""
 
 from __future__ import annotations
 
 import json
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import click
 
 from mapctl.session import Session, json_option, pass_session
-
-if TYPE_CHECKING:
-    from mapapi import Conflict, ItemId
 
 
 @click.group("view")
@@ -27,15 +26,13 @@ def view() -> None:
 @pass_session
 def view_open(session: Session, at: int | None, serializable: bool, as_json: bool) -> None:
     """Begin a view: later reads see the map as of its begin time."""
-    from mapctl import render, shape
+    from mapctl import render
 
-    opened = session.workspace.open(
-        session.view, at, "serializable" if serializable else "snapshot"
-    )
+    opened = session.call("view_open", view=session.view, at=at, serializable=serializable)
     if as_json:
-        render.emit_json(shape.view_summary(opened))
+        render.emit_json(opened)
     else:
-        render.line(f"view {opened.name} open at time {opened.begin_time}")
+        render.line(f"view {opened['name']} open at time {opened['begin_time']}")
 
 
 @view.command("abort")
@@ -44,7 +41,7 @@ def view_abort(session: Session) -> None:
     """Drop the view's staged changes and conflicts."""
     from mapctl import render
 
-    session.workspace.abort(session.view)
+    session.call("view_abort", view=session.view)
     render.line(f"view {session.view} aborted")
 
 
@@ -53,16 +50,14 @@ def view_abort(session: Session) -> None:
 @pass_session
 def view_list(session: Session, as_json: bool) -> None:
     """List the open views."""
-    from mapctl import render, shape
+    from mapctl import render
 
-    rows = [shape.view_summary(v) for v in session.workspace.views()]
+    info = session.call("view_list")
     if as_json:
-        render.emit_json({"views": rows})
+        render.emit_json(info)
     else:
-        render.table(
-            "views",
-            ["name", "begin time", "isolation", "staged", "conflicts"],
-            [r.values() for r in rows],
+        render.records(
+            "views", info["views"], ["name", "begin_time", "isolation", "staged", "conflicts"]
         )
 
 
@@ -73,33 +68,18 @@ def status(session: Session, as_json: bool) -> None:
     """Show the view, its begin time, staged changes and conflicts."""
     from mapctl import render
 
-    current = session.workspace.get(session.view)
-    now = session.peer.now()
-    info: dict[str, Any] = {
-        "view": session.view,
-        "open": current is not None,
-        "begin_time": current.begin_time if current else None,
-        "now": now,
-        "staged": [
-            {"op": c.op.name.lower(), "table": c.table, "id": c.item_id, "chunk": c.chunk_id}
-            for c in (current.changes if current else [])
-        ],
-        "conflicts": [c.item_id for c in (current.conflicts if current else [])],
-    }
+    info = session.call("status", view=session.view)
     if as_json:
         render.emit_json(info)
         return
-    if current is None:
-        render.line(f"view {session.view}: not open (now = {now}); `set` opens it")
+    if not info["open"]:
+        render.line(f"view {session.view}: not open (now = {info['now']}); `set` opens it")
         return
-    render.line(f"view {session.view} at time {current.begin_time} (now = {now})")
-    render.table(
-        "staged changes",
-        ["op", "table", "id"],
-        [(s["op"], s["table"], s["id"]) for s in info["staged"]],
-    )
-    if current.conflicts:
-        render.line(f"{len(current.conflicts)} unresolved conflict(s): run `mapctl diff`", "yellow")
+    render.line(f"view {session.view} at time {info['begin_time']} (now = {info['now']})")
+    render.records("staged changes", info["staged"], ["op", "table", "id"])
+    if info["conflicts"]:
+        count = len(info["conflicts"])
+        render.line(f"{count} unresolved conflict(s): run `mapctl diff`", "yellow")
 
 
 def _read_data(text: str) -> str:
@@ -124,20 +104,22 @@ def set_item(
     session: Session, table_name: str, args: tuple[str, ...], chunk: str | None, as_json: bool
 ) -> None:
     """Stage an insert (no ID) or an update of ID. DATA is JSON, @FILE or - for stdin."""
-    from mapapi import ChunkId, ItemId
     from mapctl import render
 
     if len(args) > 2:
         raise click.UsageError("expected TABLE [ID] DATA; quote DATA as one argument")
-    item = ItemId(session.resolve_id("item", args[0])) if len(args) == 2 else None
-    chunk_id = ChunkId(session.resolve_id("chunk", chunk)) if chunk else None
-    item_id = session.workspace.stage_set(
-        session.view, table_name, _read_data(args[-1]), item, chunk_id
+    info = session.call(
+        "set",
+        view=session.view,
+        table=table_name,
+        data=_read_data(args[-1]),
+        item=args[0] if len(args) == 2 else None,
+        chunk=chunk,
     )
     if as_json:
-        render.emit_json({"id": item_id, "op": "update" if item else "insert"})
+        render.emit_json(info)
     else:
-        render.line(item_id)
+        render.line(info["id"])
 
 
 @click.command("get")
@@ -148,22 +130,13 @@ def set_item(
 @pass_session
 def get_item(session: Session, table_name: str, item: str, at: int | None, as_json: bool) -> None:
     """Print one item's fields (the view's snapshot plus its staged changes)."""
-    from mapapi import ItemId, ItemNotFound
     from mapctl import render
 
-    item_id = ItemId(session.resolve_id("item", item))
-    tx = session.workspace.reader(session.view, at)
-    message = session.run(tx.get(table_name, item_id))
-    if message is None:
-        raise ItemNotFound(
-            f"no item {item_id} in table {table_name!r} at time {tx.begin_time}; "
-            f"`mapctl ls {table_name}` lists the items"
-        )
-    fields = session.peer.table(table_name).to_dict(message)
+    info = session.call("get", view=session.view, table=table_name, item=item, at=at)
     if as_json:
-        render.emit_json(fields)
+        render.emit_json(info["data"])
     else:
-        render.pretty_json(fields)
+        render.pretty_json(info["data"])
 
 
 @click.command("ls")
@@ -174,21 +147,16 @@ def get_item(session: Session, table_name: str, item: str, at: int | None, as_js
 @pass_session
 def ls(session: Session, table_name: str, chunk: str | None, at: int | None, as_json: bool) -> None:
     """List the items of TABLE as the view sees them."""
-    from mapapi import ChunkId
     from mapctl import render
 
-    chunk_id = ChunkId(session.resolve_id("chunk", chunk)) if chunk else None
-    tx = session.workspace.reader(session.view, at)
-    descriptor = session.peer.table(table_name)
-    found = session.run(tx.items(table_name, chunk_id))
-    rows = [{"id": i, "data": descriptor.to_dict(m)} for i, m in found.items()]
+    info = session.call("ls", view=session.view, table=table_name, chunk=chunk, at=at)
     if as_json:
-        render.emit_json({"items": rows})
+        render.emit_json({"items": info["items"]})
     else:
         render.table(
-            f"items of {table_name} at time {tx.begin_time}",
+            f"items of {table_name} at time {info['time']}",
             ["id", "data"],
-            [(r["id"], json.dumps(r["data"])) for r in rows],
+            [(r["id"], json.dumps(r["data"])) for r in info["items"]],
         )
 
 
@@ -198,12 +166,10 @@ def ls(session: Session, table_name: str, chunk: str | None, at: int | None, as_
 @pass_session
 def rm(session: Session, table_name: str, item: str) -> None:
     """Stage the removal of an item."""
-    from mapapi import ItemId
     from mapctl import render
 
-    item_id = ItemId(session.resolve_id("item", item))
-    session.workspace.stage_remove(session.view, table_name, item_id)
-    render.line(f"staged removal of {item_id}")
+    info = session.call("rm", view=session.view, table=table_name, item=item)
+    render.line(f"staged removal of {info['id']}")
 
 
 @click.command("commit")
@@ -213,23 +179,28 @@ def rm(session: Session, table_name: str, item: str) -> None:
 def commit(session: Session, message: str, as_json: bool) -> None:
     """Commit the view's staged changes. Exits 3 on conflict; the conflicts stay in the view."""
     from mapapi import ConflictError
-    from mapctl import render, shape
+    from mapctl import render
 
     try:
-        record = session.run(session.workspace.commit(session.view, message))
-    except ConflictError as err:
+        info = session.call("commit", view=session.view, message=message)
+    except ConflictError:
         if as_json:
-            render.emit_json(
-                {"conflicts": [shape.conflict(session.peer, c) for c in err.conflicts]}
-            )
+            render.emit_json({"conflicts": session.call("diff", view=session.view)["conflicts"]})
         raise
-    info = shape.commit(record) if record else {"commit": None}
     if as_json:
         render.emit_json(info)
-    elif record is not None:
-        render.line(f"[{record.id[:8]}] time {record.time}: {message or '(no message)'}", "green")
+    elif info["commit"] is not None:
+        stamp = f"[{info['commit'][:8]}] time {info['time']}"
+        render.line(f"{stamp}: {message or '(no message)'}", "green")
     else:
         render.line(f"nothing to write; view {session.view} closed")
+
+
+def _show_conflict(c: dict[str, Any]) -> None:
+    sides = {"base": c["base"], "ours": c["ours"], "theirs": c["theirs"]}
+    from mapctl import render
+
+    render.side_by_side(f"conflict {c['table']} {c['id']}", sides, conflict=True)
 
 
 @click.command("diff")
@@ -237,34 +208,24 @@ def commit(session: Session, message: str, as_json: bool) -> None:
 @pass_session
 def diff(session: Session, as_json: bool) -> None:
     """Show the staged changes, and the conflicts after a failed commit."""
-    from mapctl import render, shape
+    from mapctl import render
 
-    current = session.workspace.get(session.view)
-    changes = shape.staged(session.peer, current) if current else []
-    conflicts = [shape.conflict(session.peer, c) for c in (current.conflicts if current else [])]
+    info = session.call("diff", view=session.view)
     if as_json:
-        render.emit_json({"view": session.view, "changes": changes, "conflicts": conflicts})
+        render.emit_json(info)
         return
-    if not changes and not conflicts:
+    if not info["changes"] and not info["conflicts"]:
         render.line(f"view {session.view}: nothing staged")
-    for ch in changes:
+    for ch in info["changes"]:
         sides = {"base": ch["base"], "ours": ch["ours"]}
         render.side_by_side(f"{ch['op']} {ch['table']} {ch['id']}", sides)
-    for c in conflicts:
-        sides = {"base": c["base"], "ours": c["ours"], "theirs": c["theirs"]}
-        render.side_by_side(f"conflict {c['table']} {c['id']}", sides, conflict=True)
+    for c in info["conflicts"]:
+        _show_conflict(c)
 
 
-def _pick(session: Session, conflict: Conflict) -> tuple[str, bytes | None]:
+def _pick(conflict: dict[str, Any]) -> tuple[str, Any]:
     """Ask how to settle one conflict on a TTY: ours, theirs, edit or skip."""
-    from mapctl import render, shape
-
-    c = shape.conflict(session.peer, conflict)
-    render.side_by_side(
-        f"conflict {c['table']} {c['id']}",
-        {"base": c["base"], "ours": c["ours"], "theirs": c["theirs"]},
-        conflict=True,
-    )
+    _show_conflict(conflict)
     answer = click.prompt(
         "keep [o]urs, [t]heirs, [e]dit, [s]kip",
         type=click.Choice(["o", "t", "e", "s"]),
@@ -272,12 +233,14 @@ def _pick(session: Session, conflict: Conflict) -> tuple[str, bytes | None]:
     )
     if answer != "e":
         return {"o": "ours", "t": "theirs", "s": "skip"}[answer], None
-    start = c["ours"] if c["ours"] is not None else c["theirs"]
+    start = conflict["ours"] if conflict["ours"] is not None else conflict["theirs"]
     text = click.edit(json.dumps(start, indent=2) + "\n", extension=".json")
     if text is None:
         return "skip", None
-    descriptor = session.peer.table(conflict.table)
-    return "edit", descriptor.encode(descriptor.from_json(text))
+    try:
+        return "edit", json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise click.BadParameter(f"the edited text is not JSON: {exc}") from exc
 
 
 @click.command("resolve")
@@ -291,39 +254,37 @@ def resolve(session: Session, items: tuple[str, ...], side: str | None, as_json:
     from mapapi import UsageError, ViewClosedError
     from mapctl import render
 
-    current = session.workspace.get(session.view)
-    if current is None or not current.conflicts:
+    conflicts = session.call("diff", view=session.view)["conflicts"]
+    if not conflicts:
         raise ViewClosedError(f"view {session.view!r} has no conflicts to resolve")
-    wanted = [_match_conflict(current.conflicts, text) for text in items]
-    resolved: list[ItemId] = []
     if side in ("ours", "theirs"):
-        resolved = session.workspace.resolve(session.view, side, wanted)  # type: ignore[arg-type]
+        info = session.call("resolve", view=session.view, side=side, items=list(items))
     elif sys.stdin.isatty():
-        for conflict in current.conflicts:
-            if wanted and conflict.item_id not in wanted:
+        resolved: list[str] = []
+        wanted = [session.call("match_conflict", view=session.view, text=t) for t in items]
+        for conflict in conflicts:
+            if wanted and conflict["id"] not in wanted:
                 continue
-            choice, data = _pick(session, conflict)
+            choice, fields = _pick(conflict)
             if choice == "skip":
                 continue
-            edited = {conflict.item_id: data} if data is not None else None
-            pick = "theirs" if choice == "theirs" else "ours"
-            resolved += session.workspace.resolve(session.view, pick, [conflict.item_id], edited)
+            edited = {conflict["id"]: fields} if choice == "edit" else None
+            result = session.call(
+                "resolve",
+                view=session.view,
+                side="theirs" if choice == "theirs" else "ours",
+                items=[conflict["id"]],
+                edited=edited,
+            )
+            resolved += result["resolved"]
+        info = {"resolved": resolved, "remaining": len(conflicts) - len(resolved)}
     else:
         raise UsageError("say --ours or --theirs (no terminal to ask on)")
-    left = len(current.conflicts) - len(resolved)
     if as_json:
-        render.emit_json({"resolved": resolved, "remaining": left})
+        render.emit_json(info)
     else:
-        render.line(f"resolved {len(resolved)} conflict(s); {left} left", "green")
-
-
-def _match_conflict(conflicts: list[Conflict], text: str) -> ItemId:
-    from mapapi import UsageError
-
-    found = [c.item_id for c in conflicts if c.item_id.startswith(text.lower())]
-    if len(found) != 1:
-        raise UsageError(f"{text!r} names {len(found)} of the view's conflicts; give a unique id")
-    return found[0]
+        done, left = len(info["resolved"]), info["remaining"]
+        render.line(f"resolved {done} conflict(s); {left} left", "green")
 
 
 def register(cli: click.Group) -> None:

@@ -307,3 +307,36 @@ class TestInteractiveResolve:
         assert json.loads(seen[0]) == ALICE
         points.commit(view="bob")
         assert points.json("get", "pts", item) == ALICE
+
+
+class TestSerializableView:
+    """A serializable view validates reads made by earlier commands (no write skew)."""
+
+    def test_reads_of_earlier_commands_are_validated(self, mapctl: Mapctl, points: Mapctl) -> None:
+        x = mapctl.insert({"balance": 50})
+        y = mapctl.insert({"balance": 50})
+        mapctl.commit("accounts")
+        for view in ("a", "b"):
+            mapctl("view", "open", "--serializable", view=view)
+            mapctl("get", "pts", x, view=view)
+            mapctl("get", "pts", y, view=view)
+        # Each view debits a different account, keeping x + y >= 0 as it sees it.
+        mapctl("set", "pts", x, '{"balance": -50}', view="a")
+        mapctl("set", "pts", y, '{"balance": -50}', view="b")
+        mapctl.commit("a debits x", view="a")
+        refused = mapctl.main("commit", "-m", "b debits y", view="b")
+        assert refused.code == 3
+        assert mapctl.json("get", "pts", y) == {"balance": 50.0}
+
+    def test_snapshot_view_does_not_validate_reads(self, mapctl: Mapctl, points: Mapctl) -> None:
+        x = mapctl.insert({"balance": 50})
+        y = mapctl.insert({"balance": 50})
+        mapctl.commit("accounts")
+        for view in ("a", "b"):
+            mapctl("view", "open", view=view)
+            mapctl("get", "pts", x, view=view)
+        mapctl("set", "pts", x, '{"balance": -50}', view="a")
+        mapctl("set", "pts", y, '{"balance": -50}', view="b")
+        mapctl.commit("a", view="a")
+        mapctl.commit("b", view="b")
+        assert mapctl.json("get", "pts", y) == {"balance": -50.0}

@@ -8,6 +8,7 @@ from mapapi.history import Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.table import message_class
 from mapapi.transaction import Change, Conflict, Op
+from mapapi.view import View
 
 CHUNK = ChunkId.new()
 ViewState = message_class("mapapi.v1.ViewState")
@@ -80,12 +81,14 @@ class TestView:
             Conflict("poses", theirs.item_id, CHUNK, base, change(Op.UPDATE), theirs),
             Conflict("poses", gone.item_id, CHUNK, None, None, gone),
         ]
-        blob = codec.encode_view("main", 42, "serializable", changes, conflicts)
-        assert codec.decode_view(blob) == ("main", 42, "serializable", changes, conflicts)
+        reads = {theirs.item_id, ItemId.new()}
+        scopes = {("poses", CHUNK), ("poses", None)}
+        view = View("main", 42, "serializable", changes, conflicts, reads, scopes)
+        assert codec.decode_view(codec.encode_view(view)) == view
 
     def test_empty_view(self) -> None:
-        blob = codec.encode_view("scratch", 0, "snapshot", [], [])
-        assert codec.decode_view(blob) == ("scratch", 0, "snapshot", [], [])
+        view = View("scratch", 0)
+        assert codec.decode_view(codec.encode_view(view)) == view
 
     @pytest.mark.parametrize(
         "blob",
@@ -101,7 +104,7 @@ class TestView:
 
     def test_blob_with_a_bad_id_is_corrupt(self) -> None:
         view = ViewState()
-        view.ParseFromString(codec.encode_view("main", 1, "snapshot", [change(Op.UPDATE)], []))
+        view.ParseFromString(codec.encode_view(View("main", 1, changes=[change(Op.UPDATE)])))
         view.changes[0].item_id = b"\x01\x02\x03"
         with pytest.raises(CorruptRepoError, match="16 bytes"):
             codec.decode_view(view.SerializeToString())
@@ -109,7 +112,7 @@ class TestView:
     @pytest.mark.parametrize("op", [0, 9])
     def test_blob_with_an_unknown_op_is_corrupt(self, op: int) -> None:
         view = ViewState()
-        view.ParseFromString(codec.encode_view("main", 1, "snapshot", [change(Op.UPDATE)], []))
+        view.ParseFromString(codec.encode_view(View("main", 1, changes=[change(Op.UPDATE)])))
         view.changes[0].op = op
         with pytest.raises(CorruptRepoError):
             codec.decode_view(view.SerializeToString())
@@ -117,7 +120,7 @@ class TestView:
     def test_conflict_without_theirs_is_corrupt(self) -> None:
         conflict = Conflict("poses", ItemId.new(), CHUNK, None, None, revision())
         view = ViewState()
-        view.ParseFromString(codec.encode_view("main", 1, "snapshot", [], [conflict]))
+        view.ParseFromString(codec.encode_view(View("main", 1, "snapshot", [], [conflict])))
         view.conflicts[0].ClearField("theirs")
         with pytest.raises(CorruptRepoError):
             codec.decode_view(view.SerializeToString())

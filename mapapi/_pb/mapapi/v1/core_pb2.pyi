@@ -89,16 +89,28 @@ class Conflict(_message.Message):
     theirs: Revision
     def __init__(self, table: _Optional[str] = ..., item_id: _Optional[bytes] = ..., base: _Optional[_Union[Revision, _Mapping]] = ..., ours: _Optional[_Union[Change, _Mapping]] = ..., theirs: _Optional[_Union[Revision, _Mapping]] = ...) -> None: ...
 
+class Scope(_message.Message):
+    __slots__ = ("table", "chunk")
+    TABLE_FIELD_NUMBER: _ClassVar[int]
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    table: str
+    chunk: bytes
+    def __init__(self, table: _Optional[str] = ..., chunk: _Optional[bytes] = ...) -> None: ...
+
 class ViewState(_message.Message):
-    __slots__ = ("name", "begin_time", "isolation", "changes", "conflicts")
+    __slots__ = ("name", "begin_time", "isolation", "changes", "conflicts", "read_set", "scopes")
     NAME_FIELD_NUMBER: _ClassVar[int]
     BEGIN_TIME_FIELD_NUMBER: _ClassVar[int]
     ISOLATION_FIELD_NUMBER: _ClassVar[int]
     CHANGES_FIELD_NUMBER: _ClassVar[int]
     CONFLICTS_FIELD_NUMBER: _ClassVar[int]
+    READ_SET_FIELD_NUMBER: _ClassVar[int]
+    SCOPES_FIELD_NUMBER: _ClassVar[int]
     name: str
     begin_time: int
     isolation: str
     changes: _containers.RepeatedCompositeFieldContainer[Change]
     conflicts: _containers.RepeatedCompositeFieldContainer[Conflict]
-    def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ...) -> None: ...
+    read_set: _containers.RepeatedScalarFieldContainer[bytes]
+    scopes: _containers.RepeatedCompositeFieldContainer[Scope]
+    def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
