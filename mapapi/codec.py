@@ -10,7 +10,7 @@ from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, types_pb2
 from mapapi.errors import CorruptRepoError
-from mapapi.history import Revision
+from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.transaction import Change, Conflict, Op
 from mapapi.view import View
@@ -53,6 +53,28 @@ def revision_from_pb(m: core_pb2.Revision) -> Revision:
         m.removed,
         PeerId.from_bytes(m.author),
         CommitId.from_bytes(m.commit_id),
+    )
+
+
+def commit_record_to_pb(r: CommitRecord) -> core_pb2.CommitRecord:
+    """A commit record as its protobuf message."""
+    return core_pb2.CommitRecord(
+        id=r.id.to_bytes(),
+        time=r.time,
+        author=r.author.to_bytes(),
+        message=r.message,
+        chunks=[c.to_bytes() for c in r.chunks],
+    )
+
+
+def commit_record_from_pb(m: core_pb2.CommitRecord) -> CommitRecord:
+    """A commit record from its protobuf message (raises ValueError on bad ids)."""
+    return CommitRecord(
+        CommitId.from_bytes(m.id),
+        m.time,
+        PeerId.from_bytes(m.author),
+        m.message,
+        tuple(ChunkId.from_bytes(c) for c in m.chunks),
     )
 
 

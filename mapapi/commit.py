@@ -1,20 +1,85 @@
 """The writer's side of a commit: lock, validate on the current replica, apply.
 
-On one peer the "lock" is the store's exclusive section, which also keeps other
-processes on the same repository out; validation and apply happen inside it,
-so a commit is all-or-nothing and never interleaves with another (DESIGN §5).
+On a peer with no swarm the "lock" is the store's exclusive section, which also
+keeps other processes on the same repository out (`commit_locally`). In a swarm
+(`commit_distributed`) the writer write-locks every touched chunk at every
+holder, in ascending `ChunkId` order (no deadlock), validates on its own
+replica (current once every holder granted), stages one batch per chunk at
+every other holder, applies locally, and sends apply+unlock (DESIGN §5).
+Validation is the same pure function either way.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from mapapi.clock import LamportClock
 from mapapi.errors import ConflictError
 from mapapi.history import CommitRecord, Revision
-from mapapi.ids import CommitId, ItemId
-from mapapi.store.base import Store
+from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.lock_client import Held, LockService
+from mapapi.replication import Replicator
+from mapapi.store.base import ReplicaStore, Store
 from mapapi.transaction import MergeFn, Transaction, build_revisions, validate
+
+Applied = Callable[[CommitRecord, list[Revision]], None]
+
+
+@dataclass
+class _Decision:
+    """What validation decided: the revisions to write under a new commit, or nothing."""
+
+    record: CommitRecord | None
+    revisions: list[Revision]
+
+
+def _decide(
+    store: Store, tx: Transaction, message: str, clock: LamportClock, try_merge: MergeFn | None
+) -> _Decision:
+    """Validate `tx` on the current replica and stamp its revisions (no writes).
+
+    Raises:
+        ConflictError: with (base, ours, theirs) for every conflicting item.
+    """
+    changes = tx.changes
+    read_ids = _read_ids(store, tx)
+    latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
+    accepted, conflicts = validate(
+        changes,
+        latest,
+        tx.since,
+        read_set=read_ids,
+        try_merge=try_merge,
+        base_of=lambda item_id: store.read(item_id, tx.begin_time),
+    )
+    clock.advance_to(store.clock())
+    if conflicts:
+        raise ConflictError(conflicts, tx, resolved_at=store.clock())
+    if not accepted:
+        return _Decision(None, [])
+    time = clock.tick()
+    chunks = tuple(sorted({c.chunk_id for c in accepted}))
+    record = CommitRecord(CommitId.new(), time, tx.author, message, chunks)
+    return _Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
+
+
+def _read_ids(store: Store, tx: Transaction) -> set[ItemId]:
+    """The items a serializable transaction must find unchanged (reads and phantoms)."""
+    if tx.isolation != "serializable":
+        return set()
+    read_ids = tx.read_set
+    for table, chunk in tx.scopes:
+        read_ids |= {
+            r.item_id for r in store.changed_since(tx.begin_time, table=table, chunk=chunk)
+        }
+    return read_ids
+
+
+def _finish(tx: Transaction, decision: _Decision, on_applied: Applied | None) -> None:
+    tx.committed(decision.revisions)
+    if on_applied is not None and decision.record is not None:
+        on_applied(decision.record, decision.revisions)
 
 
 def commit_locally(
@@ -23,9 +88,9 @@ def commit_locally(
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
-    on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
+    on_applied: Applied | None = None,
 ) -> CommitRecord | None:
-    """Commit `tx` against `store` atomically.
+    """Commit `tx` against `store` atomically (no swarm).
 
     Returns:
         The commit record, or None when nothing was written.
@@ -34,40 +99,71 @@ def commit_locally(
         ConflictError: with (base, ours, theirs) for every conflicting item.
     """
     with store.exclusive():
-        changes = tx.changes
-        read_ids: set[ItemId] = set()
-        if tx.isolation == "serializable":
-            read_ids = tx.read_set
-            for table, chunk in tx.scopes:
-                # Phantoms: anything written in a scanned range after we began.
-                read_ids |= {
-                    r.item_id for r in store.changed_since(tx.begin_time, table=table, chunk=chunk)
-                }
-        latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
-        accepted, conflicts = validate(
-            changes,
-            latest,
-            tx.since,
-            read_set=read_ids,
-            try_merge=try_merge,
-            base_of=lambda item_id: store.read(item_id, tx.begin_time),
-        )
-        clock.advance_to(store.clock())
-        if conflicts:
-            raise ConflictError(conflicts, tx, resolved_at=store.clock())
-        if not accepted:
-            return None
-        time = clock.tick()
-        record = CommitRecord(
-            CommitId.new(),
-            time,
-            tx.author,
-            message,
-            tuple(sorted({c.chunk_id for c in accepted})),
-        )
-        revisions = build_revisions(accepted, latest, time, tx.author, record.id)
-        store.apply_commit(record, revisions)
-    tx.committed(revisions)
-    if on_applied is not None:
-        on_applied(record, revisions)
-    return record
+        decision = _decide(store, tx, message, clock, try_merge)
+        if decision.record is not None:
+            store.apply_commit(decision.record, decision.revisions)
+    _finish(tx, decision, on_applied)
+    return decision.record
+
+
+def _chunks_to_lock(store: Store, tx: Transaction) -> list[ChunkId]:
+    """Written chunks, plus the chunks a serializable transaction read, in id order."""
+    chunks = {c.chunk_id for c in tx.changes}
+    if tx.isolation == "serializable":
+        chunks |= {c for _, c in tx.scopes if c is not None}
+        chunks |= {cid for i in tx.read_set if (cid := _chunk_of(store, i)) is not None}
+        for table, chunk in tx.scopes:
+            if chunk is None:
+                chunks |= {c.id for c in store.chunks(table)}
+    return sorted(chunks)
+
+
+def _chunk_of(store: Store, item_id: ItemId) -> ChunkId | None:
+    revision = store.read(item_id, store.clock())
+    return None if revision is None else revision.chunk_id
+
+
+async def commit_distributed(
+    store: ReplicaStore,
+    locks: LockService,
+    replicator: Replicator,
+    tx: Transaction,
+    message: str,
+    clock: LamportClock,
+    try_merge: MergeFn | None,
+    on_applied: Applied | None = None,
+) -> CommitRecord | None:
+    """Commit `tx` across every holder of the chunks it touches.
+
+    Raises:
+        ConflictError: as on one peer; every lock is released, nothing written.
+        LockTimeout, NetworkError: a holder did not grant or stage in time;
+            nothing was applied anywhere (retriable).
+    """
+    held: list[Held] = []
+    decision = _Decision(None, [])
+    pushed = False
+    try:
+        for chunk in _chunks_to_lock(store, tx):
+            held.append(await locks.acquire(chunk, store.holders(chunk) or [locks.me]))
+        decision = _decide(store, tx, message, clock, try_merge)
+        record = decision.record
+        if record is not None:
+            await replicator.push(
+                held,
+                record,
+                decision.revisions,
+                lambda: store.apply_commit(record, decision.revisions),
+            )
+            pushed = True
+    finally:
+        if decision.record is not None and not pushed:
+            await replicator.abort(held, decision.record.id)
+        for h in reversed(held):
+            # After a push, the other holders released with the apply message.
+            mine = (
+                Held(h.chunk, {p: t for p, t in h.tokens.items() if p == locks.me}) if pushed else h
+            )
+            await locks.release(mine)
+    _finish(tx, decision, on_applied)
+    return decision.record

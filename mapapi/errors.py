@@ -171,3 +171,29 @@ class ProtocolError(NetworkError):
 
     retriable = False
     code = 43
+
+
+class SwarmError(MapError):
+    """A problem with swarm membership."""
+
+    code = 50
+    exit_code = 5
+
+
+class JoinRefused(SwarmError):
+    """A peer refused to let this one join (or is not a mapapi peer)."""
+
+    code = 51
+
+
+class NoPeersError(SwarmError):
+    """This peer knows no other peer to ask."""
+
+    retriable = True
+    code = 52
+
+
+class PeerNotRunning(SwarmError):
+    """The command needs the repository's peer daemon, and none runs."""
+
+    code = 53

@@ -44,11 +44,13 @@ class ChunkLock:
         """Ask for the write lock.
 
         Returns:
-            The grant if given now (again, with the same token, if `writer`
-            already holds it: requests may be retried); None if queued.
+            The grant if given now; None if queued. A writer that already
+            holds the lock gets it again with the same token and a renewed
+            lease, so requests may be retried and re-sending one renews.
         """
         self.expire(now)
         if self.grant is not None and self.grant.writer == writer:
+            self.grant = Grant(writer, self.grant.token, now + self.lease)
             return self.grant
         if writer not in self.queue:
             self.queue.append(writer)

@@ -1,7 +1,9 @@
-"""`Peer`: the async public facade; composes the store, clock and commit path.
+"""`Peer`: the async public facade; composes the store, clock, commit path and swarm.
 
-This is the single-peer core; it holds no protocol logic of its own and
-delegates to `commit`, `transaction` and the store.
+A peer works alone on its repository until `start()` puts it on the network
+(`Swarm`); from then on every commit goes through the distributed lock and
+reaches every holder. It holds no protocol logic of its own and delegates to
+`commit`, `transaction`, `swarm` and the store.
 """
 
 from __future__ import annotations
@@ -10,29 +12,37 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mapapi.clock import LamportClock
-from mapapi.commit import commit_locally
-from mapapi.errors import UsageError
+from mapapi.commit import commit_distributed, commit_locally
+from mapapi.errors import ChunkNotFound, NotParticipatingError, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.repo import Repository
-from mapapi.store import ChunkInfo, MemoryStore, Store
+from mapapi.store import ChunkInfo, MemoryStore
+from mapapi.store.base import ReplicaStore
 from mapapi.table import TableDescriptor
 from mapapi.transaction import Change, Isolation, Transaction
 
 if TYPE_CHECKING:
     from google.protobuf.message import Message
 
+    from mapapi.membership import MemberState
     from mapapi.merge import MergePolicy
+    from mapapi.net.messages import Member
+    from mapapi.replication import Progress
+    from mapapi.swarm import Swarm
 
 
 class Peer:
     """One peer and its local map repository."""
 
-    def __init__(self, store: Store, peer_id: PeerId | None = None, *, name: str = "") -> None:
+    def __init__(
+        self, store: ReplicaStore, peer_id: PeerId | None = None, *, name: str = ""
+    ) -> None:
         self.store = store
         self.id = peer_id or PeerId.new()
         self.name = name or self.id.short
         self.clock = LamportClock(store.clock())
+        self.swarm: Swarm | None = None
         self._descriptors: dict[str, TableDescriptor] = {}
         self._policies: dict[str, MergePolicy] = {}
 
@@ -48,8 +58,66 @@ class Peer:
         return cls(MemoryStore())
 
     async def close(self) -> None:
-        """Release the store."""
+        """Leave the swarm gracefully (if on one) and release the store."""
+        if self.swarm is not None:
+            await self.swarm.leave()
+            await self.swarm.close()
+            self.swarm = None
         self.store.close()
+
+    # -- the swarm -----------------------------------------------------------------
+    async def start(self, listen: str = "tcp://127.0.0.1:0", *, lease: float = 5.0) -> str:
+        """Put this peer on the network; returns the address others join through.
+
+        Args:
+            listen: a zmq endpoint; port 0 picks a free port.
+            lease: seconds a write lock lasts unless renewed.
+        """
+        from mapapi.swarm import Swarm  # the network stack loads only when needed
+
+        if self.swarm is not None:
+            raise UsageError(f"peer already listens on {self.swarm.address}")
+        swarm = Swarm(self.id, self.name, self.store, self.clock, lease=lease)
+        address = await swarm.start(listen)
+        self.swarm = swarm
+        return address
+
+    def _on_swarm(self) -> Swarm:
+        if self.swarm is None:
+            raise UsageError("this peer is not on the network; start it first")
+        return self.swarm
+
+    @property
+    def address(self) -> str:
+        """The address other peers join through."""
+        return self._on_swarm().address
+
+    async def join(self, seed: str) -> list[Member]:
+        """Join the swarm through the member listening at `seed`; returns every member."""
+        return await self._on_swarm().join(seed)
+
+    def members(self) -> list[MemberState]:
+        """The other members of the swarm, with when each was last heard of."""
+        return self._on_swarm().members.others()
+
+    async def participate(self, chunk_id: ChunkId, progress: Progress | None = None) -> str:
+        """Replicate `chunk_id` here: fetch it with its history from a holder, under
+        its write lock, and receive every later commit. Returns the chunk's table."""
+        return await self._on_swarm().replicator.participate(chunk_id, progress)
+
+    async def leave_chunk(self, chunk_id: ChunkId, *, force: bool = False) -> None:
+        """Stop replicating `chunk_id` (the last holder needs `force`)."""
+        if self.swarm is None:
+            if not force:
+                raise UsageError(f"this peer is the only holder of {chunk_id.short}; pass force")
+            self.store.drop_chunk(chunk_id)
+            return
+        await self.swarm.replicator.leave(chunk_id, force)
+
+    def holders(self, chunk_id: ChunkId) -> list[PeerId]:
+        """The peers that hold a chunk held here."""
+        self.store.chunk_table(chunk_id)
+        return self.store.holders(chunk_id) or [self.id]
 
     async def __aenter__(self) -> Peer:
         return self
@@ -89,6 +157,7 @@ class Peer:
         self.table(table)
         chunk_id = ChunkId.new()
         self.store.add_chunk(chunk_id, table)
+        self.store.set_holders(chunk_id, [self.id])
         return chunk_id
 
     def chunks(self, table: str | None = None) -> list[ChunkInfo]:
@@ -98,8 +167,17 @@ class Peer:
         return self.store.chunks(table)
 
     def chunk_table(self, chunk_id: ChunkId) -> str:
-        """The table of a chunk held here."""
-        return self.store.chunk_table(chunk_id)
+        """The table of a chunk held here.
+
+        Raises:
+            NotParticipatingError: this peer does not hold the chunk.
+        """
+        try:
+            return self.store.chunk_table(chunk_id)
+        except ChunkNotFound:
+            raise NotParticipatingError(
+                f"this peer does not hold chunk {chunk_id}; `mapctl chunk participate` first"
+            ) from None
 
     def set_merge_policy(self, table: str, policy: MergePolicy | None) -> None:
         """Install (or with None, remove) the auto-merge policy of a table."""
@@ -111,10 +189,16 @@ class Peer:
 
     # -- transactions ---------------------------------------------------------
     def now(self) -> int:
-        """The newest time whose commits are all applied here."""
-        time = self.store.clock()
-        self.clock.advance_to(time)
-        return time
+        """The time a transaction begun now reads at.
+
+        Alone, the newest commit time applied to the store (other processes may
+        commit to it too). In a swarm, the Lamport clock, which every message
+        advances: a view then includes every commit this peer has heard of, and
+        reads of a chunk wait while a writer holds it, so no commit at or
+        before that time can still arrive (DESIGN §5).
+        """
+        self.clock.advance_to(self.store.clock())
+        return self.clock.now() if self.swarm is not None else self.store.clock()
 
     def begin(self, at: int | None = None, *, isolation: Isolation = "snapshot") -> Transaction:
         """A transaction reading the map as of now (or of logical time `at`)."""
@@ -128,16 +212,47 @@ class Peer:
         return self.store.read(item_id, time)
 
     async def read(self, item_id: ItemId, time: int) -> Revision | None:
-        """Like `read_local` (one peer holds every chunk)."""
+        """The item at `time`; in a swarm, an item of a chunk not held here is
+        fetched first (its chunk is found by asking the members)."""
+        revision = self.store.read(item_id, time)
+        if self.swarm is None:
+            return revision
+        if revision is None and self.store.item_chunk(item_id) is None:
+            try:
+                found = await self.swarm.replicator.find_holders(item=item_id)
+            except ChunkNotFound:
+                return None
+            if found.chunk is not None:
+                await self.swarm.replicator.participate(found.chunk)
+        chunk = self.store.item_chunk(item_id)
+        if chunk is not None:
+            await self.swarm.locks.wait_readable(chunk)
         return self.store.read(item_id, time)
 
     async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
-        """Items visible at `time` in a table or chunk."""
+        """Items visible at `time` in a table or chunk; a chunk not held here is
+        fetched first."""
+        if self.swarm is not None:
+            if chunk is not None and chunk not in {c.id for c in self.store.chunks()}:
+                await self.swarm.replicator.participate(chunk)
+            chunks = [chunk] if chunk is not None else [c.id for c in self.store.chunks(table)]
+            for each in chunks:
+                await self.swarm.locks.wait_readable(each)
         return self.store.scan(time, table=table, chunk=chunk)
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply a transaction (see `mapapi.commit`)."""
-        return commit_locally(self.store, tx, message, self.clock, self._try_merge)
+        if self.swarm is None:
+            return commit_locally(self.store, tx, message, self.clock, self._try_merge)
+        return await commit_distributed(
+            self.store,
+            self.swarm.locks,
+            self.swarm.replicator,
+            tx,
+            message,
+            self.clock,
+            self._try_merge,
+        )
 
     def _try_merge(self, ours: Change, theirs: Revision, base: Revision | None) -> bytes | None:
         policy = self._policies.get(ours.table)

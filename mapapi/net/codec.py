@@ -15,6 +15,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Generic, TypeVar
 
 from google.protobuf.message import DecodeError
@@ -22,6 +23,7 @@ from google.protobuf.message import DecodeError
 from mapapi._pb.mapapi.v1 import wire_pb2
 from mapapi.errors import MapError, ProtocolError
 from mapapi.ids import PeerId
+from mapapi.net import fields, messages
 
 B = TypeVar("B")
 
@@ -97,6 +99,12 @@ def _register(
     _BY_FIELD[field] = codec
 
 
+def _register_swarm_bodies() -> None:
+    """Register every body of `mapapi.net.messages` with the generic converter."""
+    for field, cls in messages.SWARM_BODIES.items():
+        _register(field, cls, fields.fill, partial(fields.read, cls))
+
+
 def _fill_error(b: ErrorReply, m: Any) -> None:
     m.code = b.code
     m.message = b.message
@@ -108,6 +116,7 @@ def _fill_payload(b: Ping | Pong, m: Any) -> None:
 
 
 _register("error", ErrorReply, _fill_error, lambda m: ErrorReply(m.code, m.message))
+_register_swarm_bodies()
 _register("ping", Ping, _fill_payload, lambda m: Ping(m.payload))
 _register("pong", Pong, _fill_payload, lambda m: Pong(m.payload))
 

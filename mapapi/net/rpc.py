@@ -70,6 +70,7 @@ class Rpc:
         self._tasks: set[asyncio.Task[None]] = set()
         self._ids = itertools.count(1)
         self._closed = False
+        self.on_seen: Callable[[PeerId], None] | None = None  # called for every message
         transport.set_sink(self)
 
     @property
@@ -210,6 +211,8 @@ class Rpc:
     def on_message(self, msg: Inbound) -> None:
         """Resolve a pending request, or run the handler of a request/notification."""
         env = msg.envelope
+        if self.on_seen is not None:
+            self.on_seen(env.sender)
         if env.kind is Kind.REPLY:
             entry = self._pending.get(env.request_id)
             if entry is None or entry[0] != msg.address or entry[1].done():

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 
 IdKind = Literal["item", "chunk", "commit"]
 
@@ -103,6 +103,39 @@ class Store(Protocol):
 
     def views(self) -> dict[str, bytes]:
         """Every view by name."""
+
+
+class ReplicaStore(Store, Protocol):
+    """What replication needs on top of `Store` (both stores provide it)."""
+
+    def holders(self, chunk_id: ChunkId) -> list[PeerId]:
+        """The peers that hold a chunk, in id order."""
+
+    def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
+        """Replace a chunk's holder set."""
+
+    def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
+        """The full history of a chunk's items."""
+
+    def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
+        """Records of the commits that wrote to a chunk, oldest first."""
+
+    def item_chunk(self, item_id: ItemId) -> ChunkId | None:
+        """The chunk an item belongs to, if known here."""
+
+    def install_chunk(
+        self,
+        chunk_id: ChunkId,
+        table: str,
+        type_name: str,
+        revisions: Sequence[Revision],
+        commits: Sequence[CommitRecord],
+        holders: Sequence[PeerId],
+    ) -> None:
+        """Take in a replica received from a holder, atomically."""
+
+    def drop_chunk(self, chunk_id: ChunkId) -> None:
+        """Forget a chunk's replica (commit records stay)."""
 
 
 def newest_first(records: Iterator[CommitRecord] | list[CommitRecord]) -> list[CommitRecord]:

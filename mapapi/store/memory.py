@@ -8,7 +8,7 @@ from contextlib import contextmanager
 
 from mapapi.errors import ChunkNotFound, UsageError
 from mapapi.history import CommitRecord, ItemHistory, Revision, revision_at
-from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store.base import ChunkInfo, IdKind, newest_first
 
 
@@ -23,6 +23,7 @@ class MemoryStore:
         self._items: dict[ItemId, ItemHistory] = {}
         self._commits: dict[CommitId, tuple[CommitRecord, list[Revision]]] = {}
         self._views: dict[str, bytes] = {}
+        self._holders: dict[ChunkId, set[PeerId]] = {}
 
     def close(self) -> None:
         """Nothing to release."""
@@ -125,11 +126,14 @@ class MemoryStore:
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
         """Apply atomically under the lock."""
         with self._lock:
-            if record.id in self._commits:
-                return
+            # Idempotent and additive, like the SQLite store.
+            applied = self._commits.setdefault(record.id, (record, []))[1]
+            known = {(r.item_id, r.update_time) for r in applied}
             for revision in revisions:
+                if (revision.item_id, revision.update_time) in known:
+                    continue
                 self._items.setdefault(revision.item_id, ItemHistory()).add(revision)
-            self._commits[record.id] = (record, list(revisions))
+                applied.append(revision)
             self._clock = max(self._clock, record.time)
 
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
@@ -171,3 +175,60 @@ class MemoryStore:
     def views(self) -> dict[str, bytes]:
         """All views."""
         return dict(self._views)
+
+    # -- replication -------------------------------------------------------------
+    def holders(self, chunk_id: ChunkId) -> list[PeerId]:
+        """The peers that hold a chunk, in id order."""
+        return sorted(self._holders.get(chunk_id, ()))
+
+    def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
+        """Replace a chunk's holder set."""
+        self._holders[chunk_id] = set(peers)
+
+    def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
+        """The full history of a chunk's items."""
+        with self._lock:
+            found = [r for h in self._items.values() for r in h.revisions if r.chunk_id == chunk_id]
+        return sorted(found, key=lambda r: (r.item_id, r.update_time))
+
+    def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
+        """Records of the commits that wrote to a chunk, oldest first."""
+        ids = {r.commit_id for r in self.chunk_revisions(chunk_id)}
+        return sorted((self._commits[i][0] for i in ids), key=lambda c: c.time)
+
+    def item_chunk(self, item_id: ItemId) -> ChunkId | None:
+        """The chunk of an item."""
+        history = self._items.get(item_id)
+        latest = history.latest() if history else None
+        return latest.chunk_id if latest else None
+
+    def install_chunk(
+        self,
+        chunk_id: ChunkId,
+        table: str,
+        type_name: str,
+        revisions: Sequence[Revision],
+        commits: Sequence[CommitRecord],
+        holders: Sequence[PeerId],
+    ) -> None:
+        """Take in a replica received from a holder."""
+        with self._lock:
+            known = self._tables.get(table)
+            if known is not None and known != type_name:
+                raise UsageError(f"table {table!r} holds {known} here but {type_name} in the swarm")
+            self._tables.setdefault(table, type_name)
+            self._chunks.setdefault(chunk_id, table)
+            records = {c.id: c for c in commits}
+            for revision in revisions:
+                self.apply_commit(records[revision.commit_id], [revision])
+            self.set_holders(chunk_id, holders)
+
+    def drop_chunk(self, chunk_id: ChunkId) -> None:
+        """Forget a chunk's replica."""
+        with self._lock:
+            self._chunks.pop(chunk_id, None)
+            self._holders.pop(chunk_id, None)
+            for item_id in [
+                i for i, h in self._items.items() if h.revisions[0].chunk_id == chunk_id
+            ]:
+                del self._items[item_id]

@@ -43,6 +43,9 @@ CREATE TABLE IF NOT EXISTS commits (
     message TEXT NOT NULL, chunks TEXT NOT NULL);
 CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
 CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
+CREATE TABLE IF NOT EXISTS holders (
+    chunk_id TEXT NOT NULL REFERENCES chunks(id) ON DELETE CASCADE, peer_id TEXT NOT NULL,
+    PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
 """
 
 _REV_COLUMNS = (
@@ -294,15 +297,16 @@ class SqliteStore:
         """Write the record and its revisions in one SQL transaction."""
         con = self._con()
         with self._write(con):
-            if con.execute("SELECT 1 FROM commits WHERE id = ?", (record.id,)).fetchone():
-                return  # already applied: applying is idempotent
+            # Idempotent and additive: a commit that spans chunks reaches a holder
+            # as one batch per chunk, each applied on its own.
             con.execute(
-                "INSERT INTO commits VALUES (?, ?, ?, ?, ?)",
+                "INSERT OR IGNORE INTO commits VALUES (?, ?, ?, ?, ?)",
                 (record.id, record.time, record.author, record.message, ",".join(record.chunks)),
             )
             con.executemany(
-                "INSERT INTO revisions (item_id, update_time, table_name, chunk_id, data, "
-                "insert_time, removed, author, commit_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT OR IGNORE INTO revisions (item_id, update_time, table_name, chunk_id, "
+                "data, insert_time, removed, author, commit_id) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 [
                     (
                         r.item_id,
@@ -396,3 +400,85 @@ class SqliteStore:
     def views(self) -> dict[str, bytes]:
         """All views."""
         return {n: bytes(b) for n, b in self._con().execute("SELECT name, body FROM views")}
+
+    # -- replication -------------------------------------------------------------
+    def holders(self, chunk_id: ChunkId) -> list[PeerId]:
+        """The peers that hold a chunk, in id order."""
+        rows = self._con().execute(
+            "SELECT peer_id FROM holders WHERE chunk_id = ? ORDER BY peer_id", (chunk_id,)
+        )
+        return [PeerId(r[0]) for r in rows]
+
+    def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
+        """Replace a chunk's holder set."""
+        con = self._con()
+        with self._write(con):
+            con.execute("DELETE FROM holders WHERE chunk_id = ?", (chunk_id,))
+            con.executemany(
+                "INSERT OR IGNORE INTO holders VALUES (?, ?)", [(chunk_id, p) for p in peers]
+            )
+
+    def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
+        """Every revision of every item of a chunk (its full history)."""
+        rows = self._con().execute(
+            f"SELECT {_REV_COLUMNS} FROM revisions WHERE chunk_id = ? "
+            "ORDER BY item_id, update_time",
+            (chunk_id,),
+        )
+        return [_revision(r) for r in rows]
+
+    def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
+        """The records of every commit that wrote to a chunk, oldest first."""
+        rows = self._con().execute(
+            "SELECT id, time, author, message, chunks FROM commits WHERE id IN "
+            "(SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?) ORDER BY time",
+            (chunk_id,),
+        )
+        return [self._record(r) for r in rows]
+
+    def item_chunk(self, item_id: ItemId) -> ChunkId | None:
+        """The chunk an item belongs to, if this store has it."""
+        row = (
+            self._con()
+            .execute("SELECT chunk_id FROM revisions WHERE item_id = ? LIMIT 1", (item_id,))
+            .fetchone()
+        )
+        return None if row is None else ChunkId(row[0])
+
+    def install_chunk(
+        self,
+        chunk_id: ChunkId,
+        table: str,
+        type_name: str,
+        revisions: Sequence[Revision],
+        commits: Sequence[CommitRecord],
+        holders: Sequence[PeerId],
+    ) -> None:
+        """Take in a replica received from a holder, atomically (all or nothing).
+
+        Raises:
+            UsageError: this repository has a table of that name with another type.
+        """
+        con = self._con()
+        with self._write(con):
+            known = con.execute("SELECT type_name FROM tables WHERE name = ?", (table,)).fetchone()
+            if known is not None and known[0] != type_name:
+                raise UsageError(
+                    f"table {table!r} holds {known[0]} here but {type_name} in the swarm; "
+                    "rename one of them"
+                )
+            con.execute("INSERT OR IGNORE INTO tables VALUES (?, ?)", (table, type_name))
+            con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+            by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
+            for revision in revisions:
+                by_commit.setdefault(revision.commit_id, []).append(revision)
+            for record in commits:
+                self.apply_commit(record, by_commit[record.id])
+            self.set_holders(chunk_id, holders)
+
+    def drop_chunk(self, chunk_id: ChunkId) -> None:
+        """Forget a chunk's replica (this peer left it); commit records stay."""
+        con = self._con()
+        with self._write(con):
+            con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
+            con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))

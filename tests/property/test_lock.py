@@ -35,7 +35,9 @@ class LockMachine(RuleBasedStateMachine):
         if grant is None:
             self.waiting.add(writer)
         elif before is not None and before.writer == writer:
-            assert grant.token == before.token  # a retried request gets the same lease
+            assert grant.token == before.token  # a retried request renews the same lease
+            assert grant.expires == self.now + self.lock.lease
+            self.granted[-1] = grant
         self._record(grant)
         self._record(self.lock.grant)
 

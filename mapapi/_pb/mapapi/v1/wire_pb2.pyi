@@ -1,13 +1,15 @@
+from mapapi._pb.mapapi.v1 import core_pb2 as _core_pb2
+from google.protobuf.internal import containers as _containers
 from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
 from google.protobuf import descriptor as _descriptor
 from google.protobuf import message as _message
-from collections.abc import Mapping as _Mapping
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
 from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Envelope(_message.Message):
-    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong")
+    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "hello", "welcome", "bye", "control_call", "control_result")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Envelope.Kind]
@@ -25,6 +27,23 @@ class Envelope(_message.Message):
     ERROR_FIELD_NUMBER: _ClassVar[int]
     PING_FIELD_NUMBER: _ClassVar[int]
     PONG_FIELD_NUMBER: _ClassVar[int]
+    ACK_FIELD_NUMBER: _ClassVar[int]
+    LOCK_REQUEST_FIELD_NUMBER: _ClassVar[int]
+    LOCK_GRANT_FIELD_NUMBER: _ClassVar[int]
+    UNLOCK_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_BATCH_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_APPLY_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_ABORT_FIELD_NUMBER: _ClassVar[int]
+    PARTICIPATE_FIELD_NUMBER: _ClassVar[int]
+    CHUNK_PART_FIELD_NUMBER: _ClassVar[int]
+    HOLDER_CHANGE_FIELD_NUMBER: _ClassVar[int]
+    HOLDERS_QUERY_FIELD_NUMBER: _ClassVar[int]
+    HOLDERS_FIELD_NUMBER: _ClassVar[int]
+    HELLO_FIELD_NUMBER: _ClassVar[int]
+    WELCOME_FIELD_NUMBER: _ClassVar[int]
+    BYE_FIELD_NUMBER: _ClassVar[int]
+    CONTROL_CALL_FIELD_NUMBER: _ClassVar[int]
+    CONTROL_RESULT_FIELD_NUMBER: _ClassVar[int]
     request_id: int
     sender: bytes
     lamport: int
@@ -32,7 +51,24 @@ class Envelope(_message.Message):
     error: ErrorReply
     ping: Ping
     pong: Pong
-    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ...) -> None: ...
+    ack: Ack
+    lock_request: LockRequest
+    lock_grant: LockGrant
+    unlock: Unlock
+    commit_batch: CommitBatch
+    commit_apply: CommitApply
+    commit_abort: CommitAbort
+    participate: ParticipateRequest
+    chunk_part: ChunkPart
+    holder_change: HolderChange
+    holders_query: HoldersQuery
+    holders: Holders
+    hello: Hello
+    welcome: Welcome
+    bye: Bye
+    control_call: ControlCall
+    control_result: ControlResult
+    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ...) -> None: ...
 
 class ErrorReply(_message.Message):
     __slots__ = ("code", "message")
@@ -53,3 +89,157 @@ class Pong(_message.Message):
     PAYLOAD_FIELD_NUMBER: _ClassVar[int]
     payload: bytes
     def __init__(self, payload: _Optional[bytes] = ...) -> None: ...
+
+class Ack(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class Member(_message.Message):
+    __slots__ = ("id", "address", "name")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    ADDRESS_FIELD_NUMBER: _ClassVar[int]
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    id: bytes
+    address: str
+    name: str
+    def __init__(self, id: _Optional[bytes] = ..., address: _Optional[str] = ..., name: _Optional[str] = ...) -> None: ...
+
+class LockRequest(_message.Message):
+    __slots__ = ("chunk",)
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
+
+class LockGrant(_message.Message):
+    __slots__ = ("chunk", "token", "lease")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    LEASE_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    lease: float
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., lease: _Optional[float] = ...) -> None: ...
+
+class Unlock(_message.Message):
+    __slots__ = ("chunk", "token")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ...) -> None: ...
+
+class CommitBatch(_message.Message):
+    __slots__ = ("chunk", "token", "record", "revisions")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    RECORD_FIELD_NUMBER: _ClassVar[int]
+    REVISIONS_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    record: _core_pb2.CommitRecord
+    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ...) -> None: ...
+
+class CommitApply(_message.Message):
+    __slots__ = ("chunk", "token", "commit_id")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    commit_id: bytes
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., commit_id: _Optional[bytes] = ...) -> None: ...
+
+class CommitAbort(_message.Message):
+    __slots__ = ("chunk", "token", "commit_id")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    commit_id: bytes
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., commit_id: _Optional[bytes] = ...) -> None: ...
+
+class ParticipateRequest(_message.Message):
+    __slots__ = ("chunk",)
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
+
+class ChunkPart(_message.Message):
+    __slots__ = ("chunk", "table", "holders", "revisions", "commits", "part", "parts")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TABLE_FIELD_NUMBER: _ClassVar[int]
+    HOLDERS_FIELD_NUMBER: _ClassVar[int]
+    REVISIONS_FIELD_NUMBER: _ClassVar[int]
+    COMMITS_FIELD_NUMBER: _ClassVar[int]
+    PART_FIELD_NUMBER: _ClassVar[int]
+    PARTS_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    table: _core_pb2.TableDescriptor
+    holders: _containers.RepeatedCompositeFieldContainer[Member]
+    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
+    commits: _containers.RepeatedCompositeFieldContainer[_core_pb2.CommitRecord]
+    part: int
+    parts: int
+    def __init__(self, chunk: _Optional[bytes] = ..., table: _Optional[_Union[_core_pb2.TableDescriptor, _Mapping]] = ..., holders: _Optional[_Iterable[_Union[Member, _Mapping]]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[_core_pb2.CommitRecord, _Mapping]]] = ..., part: _Optional[int] = ..., parts: _Optional[int] = ...) -> None: ...
+
+class HolderChange(_message.Message):
+    __slots__ = ("chunk", "token", "member", "joined")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
+    MEMBER_FIELD_NUMBER: _ClassVar[int]
+    JOINED_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    token: int
+    member: Member
+    joined: bool
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., member: _Optional[_Union[Member, _Mapping]] = ..., joined: _Optional[bool] = ...) -> None: ...
+
+class HoldersQuery(_message.Message):
+    __slots__ = ("chunk", "item")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    ITEM_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    item: bytes
+    def __init__(self, chunk: _Optional[bytes] = ..., item: _Optional[bytes] = ...) -> None: ...
+
+class Holders(_message.Message):
+    __slots__ = ("chunk", "table", "holders")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TABLE_FIELD_NUMBER: _ClassVar[int]
+    HOLDERS_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    table: str
+    holders: _containers.RepeatedCompositeFieldContainer[Member]
+    def __init__(self, chunk: _Optional[bytes] = ..., table: _Optional[str] = ..., holders: _Optional[_Iterable[_Union[Member, _Mapping]]] = ...) -> None: ...
+
+class Hello(_message.Message):
+    __slots__ = ("member",)
+    MEMBER_FIELD_NUMBER: _ClassVar[int]
+    member: Member
+    def __init__(self, member: _Optional[_Union[Member, _Mapping]] = ...) -> None: ...
+
+class Welcome(_message.Message):
+    __slots__ = ("members",)
+    MEMBERS_FIELD_NUMBER: _ClassVar[int]
+    members: _containers.RepeatedCompositeFieldContainer[Member]
+    def __init__(self, members: _Optional[_Iterable[_Union[Member, _Mapping]]] = ...) -> None: ...
+
+class Bye(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class ControlCall(_message.Message):
+    __slots__ = ("op", "args_json")
+    OP_FIELD_NUMBER: _ClassVar[int]
+    ARGS_JSON_FIELD_NUMBER: _ClassVar[int]
+    op: str
+    args_json: str
+    def __init__(self, op: _Optional[str] = ..., args_json: _Optional[str] = ...) -> None: ...
+
+class ControlResult(_message.Message):
+    __slots__ = ("json",)
+    JSON_FIELD_NUMBER: _ClassVar[int]
+    json: str
+    def __init__(self, json: _Optional[str] = ...) -> None: ...

@@ -1,0 +1,107 @@
+"""Generic conversion between body dataclasses and their protobuf messages.
+
+A body dataclass mirrors its wire message field by field (same names). Ids
+travel as 16 bytes (empty for None); `Revision` and `CommitRecord` use the
+storage codec; nested dataclasses (`Member`, `TableInfo`) and tuples of any of
+these recurse. Anything malformed on the way in raises ValueError, which the
+envelope decoder turns into ProtocolError.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from typing import Any
+
+from mapapi import codec as storage
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import Id
+
+_SCALARS = (str, int, float, bool, bytes)
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    hints = _HINTS.get(cls)
+    if hints is None:
+        hints = _HINTS[cls] = typing.get_type_hints(cls)
+    return hints
+
+
+def _optional(hint: Any) -> tuple[Any, bool]:
+    """(inner type, whether None is allowed) of `X | None`."""
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        return args[0], True
+    return hint, False
+
+
+def fill(body: Any, message: Any) -> None:
+    """Copy the dataclass `body` into the (mutable) protobuf `message`."""
+    message.SetInParent()  # an empty body must still select its oneof field
+    for name, hint in _hints(type(body)).items():
+        value = getattr(body, name)
+        kind, _ = _optional(hint)
+        if typing.get_origin(kind) is tuple:
+            (element,) = [a for a in typing.get_args(kind) if a is not Ellipsis]
+            repeated = getattr(message, name)
+            for item in value:
+                _put_element(repeated, element, item)
+        elif isinstance(kind, type) and issubclass(kind, Id):
+            setattr(message, name, value.to_bytes() if value is not None else b"")
+        elif kind in _SCALARS:
+            setattr(message, name, value)
+        elif kind is Revision or kind is CommitRecord:
+            getattr(message, name).CopyFrom(_to_pb(kind, value))
+        else:
+            fill(value, getattr(message, name))
+
+
+def _put_element(repeated: Any, element: type, value: Any) -> None:
+    if element is Revision or element is CommitRecord:
+        repeated.append(_to_pb(element, value))
+    elif dataclasses.is_dataclass(element):
+        fill(value, repeated.add())
+    else:
+        repeated.append(value)
+
+
+def _to_pb(kind: type, value: Any) -> Any:
+    if kind is Revision:
+        return storage.revision_to_pb(value)
+    return storage.commit_record_to_pb(value)
+
+
+def read(cls: type, message: Any) -> Any:
+    """The dataclass `cls` read back from its protobuf `message`.
+
+    Raises:
+        ValueError: an id has the wrong length or a nested value is invalid.
+    """
+    values: dict[str, Any] = {}
+    for name, hint in _hints(cls).items():
+        kind, nullable = _optional(hint)
+        raw = getattr(message, name)
+        if typing.get_origin(kind) is tuple:
+            (element,) = [a for a in typing.get_args(kind) if a is not Ellipsis]
+            values[name] = tuple(_read_value(element, item) for item in raw)
+        elif isinstance(kind, type) and issubclass(kind, Id):
+            values[name] = None if nullable and not raw else kind.from_bytes(raw)
+        else:
+            values[name] = _read_value(kind, raw)
+    return cls(**values)
+
+
+def _read_value(kind: type, raw: Any) -> Any:
+    if kind is Revision:
+        return storage.revision_from_pb(raw)
+    if kind is CommitRecord:
+        return storage.commit_record_from_pb(raw)
+    if dataclasses.is_dataclass(kind):
+        return read(kind, raw)
+    if kind in _SCALARS:
+        return raw
+    raise TypeError(f"no wire form for {kind!r}")

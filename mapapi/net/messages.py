@@ -1,0 +1,190 @@
+"""The bodies of swarm messages (DESIGN §5-6): plain frozen dataclasses.
+
+Each class maps field by field onto the message of the same name in
+`proto/mapapi/v1/wire.proto`; `mapapi.net.codec` converts them generically.
+Field types are limited to what that converter knows: ids, str, int, float,
+bool, `Member`, `TableInfo`, `Revision`, `CommitRecord`, and tuples of those.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+
+
+@dataclass(frozen=True, slots=True)
+class Member:
+    """A peer of the swarm and the address others reach it at."""
+
+    id: PeerId
+    address: str
+    name: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class TableInfo:
+    """A table's name and full protobuf type name."""
+
+    name: str
+    type_name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    """Success with nothing to return."""
+
+
+@dataclass(frozen=True, slots=True)
+class LockRequest:
+    """Ask for a chunk's write lock (the writer is the envelope's sender)."""
+
+    chunk: ChunkId
+
+
+@dataclass(frozen=True, slots=True)
+class LockGrant:
+    """A write lease with its fencing token; `lease` in seconds."""
+
+    chunk: ChunkId
+    token: int
+    lease: float
+
+
+@dataclass(frozen=True, slots=True)
+class Unlock:
+    """Release the lock (token 0: withdraw a request still waiting)."""
+
+    chunk: ChunkId
+    token: int
+
+
+@dataclass(frozen=True, slots=True)
+class CommitBatch:
+    """One chunk's revisions of a commit, to stage under the lock."""
+
+    chunk: ChunkId
+    token: int
+    record: CommitRecord
+    revisions: tuple[Revision, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class CommitApply:
+    """Apply the staged batch atomically and release the lock."""
+
+    chunk: ChunkId
+    token: int
+    commit_id: CommitId
+
+
+@dataclass(frozen=True, slots=True)
+class CommitAbort:
+    """Drop the staged batch and release the lock."""
+
+    chunk: ChunkId
+    token: int
+    commit_id: CommitId
+
+
+@dataclass(frozen=True, slots=True)
+class ParticipateRequest:
+    """Newcomer to holder: make me a holder of `chunk`."""
+
+    chunk: ChunkId
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkPart:
+    """One part of a chunk's full state, sent to a newcomer under the lock."""
+
+    chunk: ChunkId
+    table: TableInfo
+    holders: tuple[Member, ...]
+    revisions: tuple[Revision, ...]
+    commits: tuple[CommitRecord, ...]
+    part: int
+    parts: int
+
+
+@dataclass(frozen=True, slots=True)
+class HolderChange:
+    """A holder joined (or left) the chunk; sent under the chunk's lock."""
+
+    chunk: ChunkId
+    token: int
+    member: Member
+    joined: bool
+
+
+@dataclass(frozen=True, slots=True)
+class HoldersQuery:
+    """Who holds `chunk`, or (chunk None) the chunk that holds `item`?"""
+
+    chunk: ChunkId | None
+    item: ItemId | None
+
+
+@dataclass(frozen=True, slots=True)
+class Holders:
+    """The answer to `HoldersQuery`; empty when the asked peer does not know."""
+
+    chunk: ChunkId | None
+    table: str
+    holders: tuple[Member, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Hello:
+    """A peer introduces itself; answered with `Welcome`."""
+
+    member: Member
+
+
+@dataclass(frozen=True, slots=True)
+class Welcome:
+    """Every member the answering peer knows, itself included."""
+
+    members: tuple[Member, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Bye:
+    """The sender leaves the swarm gracefully."""
+
+
+@dataclass(frozen=True, slots=True)
+class ControlCall:
+    """The CLI asks the running peer to perform one `mapapi.ops` operation."""
+
+    op: str
+    args_json: str
+
+
+@dataclass(frozen=True, slots=True)
+class ControlResult:
+    """The JSON result of a `ControlCall`."""
+
+    json: str
+
+
+SWARM_BODIES: dict[str, type] = {
+    "ack": Ack,
+    "lock_request": LockRequest,
+    "lock_grant": LockGrant,
+    "unlock": Unlock,
+    "commit_batch": CommitBatch,
+    "commit_apply": CommitApply,
+    "commit_abort": CommitAbort,
+    "participate": ParticipateRequest,
+    "chunk_part": ChunkPart,
+    "holder_change": HolderChange,
+    "holders_query": HoldersQuery,
+    "holders": Holders,
+    "hello": Hello,
+    "welcome": Welcome,
+    "bye": Bye,
+    "control_call": ControlCall,
+    "control_result": ControlResult,
+}

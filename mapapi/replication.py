@@ -1,0 +1,365 @@
+"""Chunks across peers: commits to every holder, participation, leaving (DESIGN §5-6).
+
+`Replicator` serves the holder's side of the commit protocol (stage a batch
+under a current lease, apply it atomically with the unlock), hands a chunk's
+full state with history to a newcomer under the chunk's write lock, and tells
+the other holders about joins and leaves. It finds holders by asking the
+known members until the lookup index exists.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable, Sequence
+
+from mapapi.errors import ChunkNotFound, LockNotHeld, MapError, NoPeersError, UsageError
+from mapapi.history import CommitRecord, Revision
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.lock_client import Held, LockService
+from mapapi.membership import Members
+from mapapi.net.messages import (
+    Ack,
+    ChunkPart,
+    CommitAbort,
+    CommitApply,
+    CommitBatch,
+    HolderChange,
+    Holders,
+    HoldersQuery,
+    Member,
+    ParticipateRequest,
+    TableInfo,
+)
+from mapapi.net.rpc import Request, Rpc
+from mapapi.store.base import ReplicaStore
+
+log = logging.getLogger(__name__)
+
+PART_REVISIONS = 5_000  # revisions per ChunkPart message
+Progress = Callable[[int, int], None]  # (parts received, parts in all)
+
+
+class Replicator:
+    """Replication of the chunks one peer holds."""
+
+    def __init__(
+        self,
+        rpc: Rpc,
+        members: Members,
+        locks: LockService,
+        store: ReplicaStore,
+        on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
+    ) -> None:
+        self.rpc = rpc
+        self.members = members
+        self.locks = locks
+        self.store = store
+        self.on_applied = on_applied
+        self._staged: dict[tuple[ChunkId, CommitId], tuple[CommitRecord, list[Revision]]] = {}
+        self._incoming: dict[ChunkId, list[ChunkPart]] = {}
+        self.progress: dict[ChunkId, Progress] = {}
+        for body, handler in (
+            (CommitBatch, self.rpc_commit_batch),
+            (CommitApply, self.rpc_commit_apply),
+            (CommitAbort, self.rpc_commit_abort),
+            (ParticipateRequest, self.rpc_participate),
+            (ChunkPart, self.rpc_chunk_part),
+            (HolderChange, self.rpc_holder_change),
+            (HoldersQuery, self.rpc_holders_query),
+        ):
+            rpc.register(body, handler)
+
+    @property
+    def me(self) -> PeerId:
+        """This peer's id."""
+        return self.members.me.id
+
+    def _member(self, peer: PeerId) -> Member:
+        return self.members.get(peer) or Member(peer, "")
+
+    # -- the holder's side of a commit ---------------------------------------------
+    def rpc_commit_batch(self, req: Request) -> Ack:
+        """Stage one chunk's revisions of a commit under a current lease."""
+        body: CommitBatch = req.body
+        self.locks.check(body.chunk, req.sender, body.token)
+        if any(r.chunk_id != body.chunk for r in body.revisions):
+            raise UsageError(f"commit batch for {body.chunk.short} carries revisions of others")
+        self._staged[(body.chunk, body.record.id)] = (body.record, list(body.revisions))
+        return Ack()
+
+    async def rpc_commit_apply(self, req: Request) -> Ack:
+        """Apply a staged batch atomically, then release the writer's lock."""
+        body: CommitApply = req.body
+        self.locks.check(body.chunk, req.sender, body.token)
+        staged = self._staged.pop((body.chunk, body.commit_id), None)
+        if staged is None:
+            raise LockNotHeld(
+                f"no staged batch {body.commit_id.short} for chunk {body.chunk.short}"
+            )
+        record, revisions = staged
+        self.store.apply_commit(record, revisions)
+        if self.on_applied is not None:
+            self.on_applied(record, revisions)
+        await self.locks.release_local(body.chunk, req.sender, body.token)
+        return Ack()
+
+    async def rpc_commit_abort(self, req: Request) -> Ack:
+        """Drop a staged batch and release the writer's lock."""
+        body: CommitAbort = req.body
+        self._staged.pop((body.chunk, body.commit_id), None)
+        await self.locks.release_local(body.chunk, req.sender, body.token)
+        return Ack()
+
+    # -- the writer's side ---------------------------------------------------------------
+    async def push(
+        self,
+        held: Sequence[Held],
+        record: CommitRecord,
+        revisions: Sequence[Revision],
+        apply_locally: Callable[[], None],
+    ) -> None:
+        """Stage the commit at every other holder, apply it here, then apply it
+        there (which releases their locks). One batch per chunk per holder.
+
+        Raises:
+            MapError: a holder refused or did not answer the batch; nothing was
+                applied anywhere (the caller releases the locks).
+        """
+        by_chunk: dict[ChunkId, list[Revision]] = {h.chunk: [] for h in held}
+        for revision in revisions:
+            by_chunk[revision.chunk_id].append(revision)
+        remote = [
+            (h, peer, token) for h in held for peer, token in h.tokens.items() if peer != self.me
+        ]
+        await _all(
+            self.rpc.request(
+                self.members.address(peer),
+                CommitBatch(h.chunk, token, record, tuple(by_chunk[h.chunk])),
+            )
+            for h, peer, token in remote
+        )
+        apply_locally()
+        results = await asyncio.gather(
+            *(
+                self.rpc.request(self.members.address(peer), CommitApply(h.chunk, token, record.id))
+                for h, peer, token in remote
+            ),
+            return_exceptions=True,
+        )
+        for (h, peer, _), result in zip(remote, results, strict=True):
+            if isinstance(result, BaseException):
+                # Applied here and staged there: a holder that lost the apply message
+                # must catch up from another holder (restart recovery, issue 7).
+                log.warning(
+                    "holder %s did not confirm commit %s on %s: %s",
+                    peer.short,
+                    record.id.short,
+                    h.chunk.short,
+                    result,
+                )
+
+    async def abort(self, held: Sequence[Held], commit_id: CommitId) -> None:
+        """Tell every other holder to drop a staged batch (their locks are released
+        separately by the caller's `LockService.release`)."""
+        await asyncio.gather(
+            *(
+                self.rpc.request(self.members.address(peer), CommitAbort(h.chunk, 0, commit_id))
+                for h in held
+                for peer in h.tokens
+                if peer != self.me
+            ),
+            return_exceptions=True,
+        )
+
+    # -- participation -------------------------------------------------------------------
+    async def rpc_participate(self, req: Request) -> Ack:
+        """Make the sender a holder: send it the full chunk under the write lock,
+        tell the other holders, then release."""
+        chunk: ChunkId = req.body.chunk
+        table = self.store.chunk_table(chunk)  # ChunkNotFound if we do not hold it
+        newcomer = self._member(req.sender)
+        holders = self.store.holders(chunk)
+        if req.sender in holders:
+            return Ack()
+        held = await self.locks.acquire(chunk, holders)
+        try:
+            await self._send_state(chunk, table, req.sender, [*holders, req.sender])
+            others = [p for p in holders if p != self.me]
+            await _all(
+                self.rpc.request(
+                    self.members.address(p), HolderChange(chunk, held.tokens[p], newcomer, True)
+                )
+                for p in others
+            )
+            self.store.set_holders(chunk, [*holders, req.sender])
+        finally:
+            await self.locks.release(held)
+        return Ack()
+
+    async def _send_state(
+        self, chunk: ChunkId, table: str, to: PeerId, holders: Sequence[PeerId]
+    ) -> None:
+        revisions = self.store.chunk_revisions(chunk)
+        commits = {c.id: c for c in self.store.chunk_commits(chunk)}
+        info = TableInfo(table, self.store.tables()[table])
+        members = tuple(self._member(p) for p in holders)
+        pieces = [
+            revisions[i : i + PART_REVISIONS] for i in range(0, len(revisions), PART_REVISIONS)
+        ]
+        pieces = pieces or [[]]
+        address = self.members.address(to)
+        for index, piece in enumerate(pieces):
+            records = tuple(commits[c] for c in sorted({r.commit_id for r in piece}))
+            part = ChunkPart(chunk, info, members, tuple(piece), records, index, len(pieces))
+            await self.rpc.request(address, part, timeout=30.0, expect=Ack)
+
+    def rpc_chunk_part(self, req: Request) -> Ack:
+        """Collect the parts of a chunk; install it atomically with the last one."""
+        part: ChunkPart = req.body
+        parts = self._incoming.setdefault(part.chunk, [])
+        if part.part != len(parts):
+            self._incoming.pop(part.chunk, None)
+            raise UsageError(f"chunk {part.chunk.short}: part {part.part} out of order")
+        parts.append(part)
+        report = self.progress.get(part.chunk)
+        if report is not None:
+            report(len(parts), part.parts)
+        if len(parts) < part.parts:
+            return Ack()
+        del self._incoming[part.chunk]
+        for member in part.holders:
+            if member.id != self.me and member.address:
+                self.members.add(member)
+        self.store.install_chunk(
+            part.chunk,
+            part.table.name,
+            part.table.type_name,
+            [r for p in parts for r in p.revisions],
+            list({c.id: c for p in parts for c in p.commits}.values()),
+            [m.id for m in part.holders],
+        )
+        return Ack()
+
+    def rpc_holder_change(self, req: Request) -> Ack:
+        """Another holder joined or left (under the sender's lock)."""
+        body: HolderChange = req.body
+        self.locks.check(body.chunk, req.sender, body.token)
+        holders = set(self.store.holders(body.chunk))
+        if body.joined:
+            holders.add(body.member.id)
+            if body.member.address:
+                self.members.add(body.member)
+        else:
+            holders.discard(body.member.id)
+        self.store.set_holders(body.chunk, sorted(holders))
+        return Ack()
+
+    async def participate(self, chunk: ChunkId, progress: Progress | None = None) -> str:
+        """Become a holder of `chunk`, fetching it with its history from a holder.
+
+        Returns:
+            The chunk's table.
+
+        Raises:
+            ChunkNotFound: no known member holds it.
+        """
+        if self.me in self.store.holders(chunk):
+            return self.store.chunk_table(chunk)
+        found = await self.find_holders(chunk=chunk)
+        if progress is not None:
+            self.progress[chunk] = progress
+        try:
+            last: MapError | None = None
+            for member in found.holders:
+                try:
+                    await self.rpc.request(
+                        member.address, ParticipateRequest(chunk), timeout=60.0, expect=Ack
+                    )
+                    return found.table
+                except MapError as exc:
+                    last = exc
+                    log.warning("participating in %s via %s failed: %s", chunk, member.id, exc)
+            raise last or ChunkNotFound(f"no holder of chunk {chunk} answered")
+        finally:
+            self.progress.pop(chunk, None)
+
+    async def leave(self, chunk: ChunkId, force: bool = False) -> None:
+        """Stop holding `chunk`: tell the other holders under the lock, drop it here.
+
+        Raises:
+            UsageError: this is the last holder and `force` is not set.
+        """
+        self.store.chunk_table(chunk)
+        holders = self.store.holders(chunk)
+        others = [p for p in holders if p != self.me]
+        if not others and not force:
+            raise UsageError(
+                f"this peer is the last holder of chunk {chunk.short}; leaving would lose "
+                "its data: pass --force to drop it anyway"
+            )
+        held = await self.locks.acquire(chunk, holders)
+        try:
+            me = self.members.me
+            await _all(
+                self.rpc.request(
+                    self.members.address(p), HolderChange(chunk, held.tokens[p], me, False)
+                )
+                for p in others
+            )
+            self.store.drop_chunk(chunk)
+        finally:
+            await self.locks.release(held)
+        self.locks.table.drop(chunk)
+
+    # -- finding holders -------------------------------------------------------------------
+    def rpc_holders_query(self, req: Request) -> Holders:
+        """Answer who holds a chunk (or an item's chunk), if this peer holds it."""
+        body: HoldersQuery = req.body
+        chunk = body.chunk
+        if chunk is None and body.item is not None:
+            chunk = self.store.item_chunk(body.item)
+        if chunk is None or self.me not in self.store.holders(chunk):
+            return Holders(None, "", ())
+        members = tuple(self._member(p) for p in self.store.holders(chunk))
+        return Holders(chunk, self.store.chunk_table(chunk), members)
+
+    async def find_holders(
+        self, *, chunk: ChunkId | None = None, item: ItemId | None = None
+    ) -> Holders:
+        """Ask every known member who holds `chunk` (or `item`); first answer wins.
+
+        Raises:
+            NoPeersError: this peer knows no other member.
+            ChunkNotFound: nobody answered with a holder.
+        """
+        others = self.members.others()
+        if not others:
+            raise NoPeersError("this peer knows no other peer; `mapctl join ADDR` first")
+        query = HoldersQuery(chunk, item)
+        pending = [
+            asyncio.ensure_future(self.rpc.request(s.member.address, query, expect=Holders))
+            for s in others
+        ]
+        try:
+            for next_done in asyncio.as_completed(pending):
+                try:
+                    answer = await next_done
+                except MapError:
+                    continue
+                if answer.holders:
+                    return answer
+        finally:
+            for fut in pending:
+                fut.cancel()
+            await asyncio.gather(*pending, return_exceptions=True)
+        what = f"chunk {chunk}" if chunk else f"item {item}"
+        raise ChunkNotFound(f"no known peer holds {what}")
+
+
+async def _all(calls: object) -> None:
+    """Await every request; raise the first failure after all have finished."""
+    results = await asyncio.gather(*calls, return_exceptions=True)  # type: ignore[misc]
+    for result in results:
+        if isinstance(result, BaseException):
+            raise result
