@@ -10,6 +10,7 @@ processes working on one view cannot lose each other's staged changes.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from typing import Literal
@@ -31,6 +32,7 @@ class Workspace:
 
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
+        self._view_locks: dict[str, asyncio.Lock] = {}
 
     # -- persistence ---------------------------------------------------------
     def get(self, name: str) -> View | None:
@@ -154,35 +156,45 @@ class Workspace:
             ConflictError: the commit conflicted; the view now holds the
                 conflicts plus the non-conflicting changes, begun again.
         """
-        failure: ConflictError | None = None
-        record = None
-        with self.peer.store.exclusive():
-            view = self.get(name)
-            if view is None:
-                raise UsageError(f"nothing to commit in view {name!r}; stage changes with `set`")
-            # Conflicts first: a failed commit may leave nothing staged but conflicts.
-            if view.conflicts:
-                raise UnresolvedConflicts(
-                    f"view {name!r} has {len(view.conflicts)} unresolved conflict(s); "
-                    "run `mapctl diff`, then `mapctl resolve`"
-                )
-            if not (view.changes or view.isolation == "serializable"):
-                self.peer.store.delete_view(name)
-                return None
-            tx = self.transaction(view)
-            try:
-                record = await tx.commit(message)
-            except ConflictError as err:
-                failure = err
-                merged = err.merge()
-                view.begin_time, view.changes = merged.begin_time, merged.changes
-                view.read_set, view.scopes = set(), set()  # reads were of the old snapshot
-                view.conflicts = err.conflicts
-                self._save(view)
-            else:
-                self.peer.store.delete_view(name)
-        if failure is not None:
+        if self.peer.swarm is None:
+            # Alone, other processes may work on the same views: hold the store's
+            # write lock throughout (the local commit never awaits the network).
+            # A conflict is raised only after the block, so the saved conflicts stay.
+            with self.peer.store.exclusive():
+                try:
+                    return await self._commit(name, message)
+                except ConflictError as err:
+                    failure = err
             raise failure
+        # In a swarm the peer daemon is the only writer of its store, and the
+        # commit awaits other peers: serialise per view with an asyncio lock, never
+        # hold SQLite's write lock across an await.
+        async with self._view_locks.setdefault(name, asyncio.Lock()):
+            return await self._commit(name, message)
+
+    async def _commit(self, name: str, message: str) -> CommitRecord | None:
+        view = self.get(name)
+        if view is None:
+            raise UsageError(f"nothing to commit in view {name!r}; stage changes with `set`")
+        # Conflicts first: a failed commit may leave nothing staged but conflicts.
+        if view.conflicts:
+            raise UnresolvedConflicts(
+                f"view {name!r} has {len(view.conflicts)} unresolved conflict(s); "
+                "run `mapctl diff`, then `mapctl resolve`"
+            )
+        if not (view.changes or view.isolation == "serializable"):
+            self.peer.store.delete_view(name)
+            return None
+        try:
+            record = await self.transaction(view).commit(message)
+        except ConflictError as err:
+            merged = err.merge()
+            view.begin_time, view.changes = merged.begin_time, merged.changes
+            view.read_set, view.scopes = set(), set()  # reads were of the old snapshot
+            view.conflicts = err.conflicts
+            self._save(view)
+            raise
+        self.peer.store.delete_view(name)
         return record
 
     def resolve(
