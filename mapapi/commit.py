@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from mapapi.clock import LamportClock
-from mapapi.errors import ConflictError
+from mapapi.errors import ConflictError, LockNotHeld, LockTimeout
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.lock_client import Held, LockService
@@ -62,6 +62,30 @@ def _decide(
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
     record = CommitRecord(CommitId.new(), time, tx.author, message, chunks)
     return _Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
+
+
+def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
+    """Raise ConflictError now if the local replica already shows `tx` in conflict.
+
+    Called once the arbiter granted, before the other holders are asked: a
+    conflict seen here is final (history only grows), so a doomed commit costs
+    one lock at the arbiter instead of one at every holder. Passing proves
+    nothing, since this replica may lag until every holder granted; `_decide`
+    validates for real then.
+    """
+    changes = tx.changes
+    read_ids = _read_ids(store, tx)
+    latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
+    _, conflicts = validate(
+        changes,
+        latest,
+        tx.since,
+        read_set=read_ids,
+        try_merge=try_merge,
+        base_of=lambda item_id: store.read(item_id, tx.begin_time),
+    )
+    if conflicts:
+        raise ConflictError(conflicts, tx, resolved_at=store.clock())
 
 
 def _read_ids(store: Store, tx: Transaction) -> set[ItemId]:
@@ -137,24 +161,31 @@ async def commit_distributed(
 
     Raises:
         ConflictError: as on one peer; every lock is released, nothing written.
-        LockTimeout, NetworkError: a holder did not grant or stage in time;
-            nothing was applied anywhere (retriable).
+        LockTimeout, NetworkError: a holder did not grant or stage in time, or
+            a lease ran out before the commit was staged everywhere (the
+            holders' fencing refused it); nothing was applied anywhere (retriable).
     """
     held: list[Held] = []
     decision = _Decision(None, [])
     pushed = False
     try:
         for chunk in _chunks_to_lock(store, tx):
-            held.append(await locks.acquire(chunk, store.holders(chunk) or [locks.me]))
+            held.append(await replicator.lock(chunk, lambda: _precheck(store, tx, try_merge)))
         decision = _decide(store, tx, message, clock, try_merge)
         record = decision.record
         if record is not None:
-            await replicator.push(
-                held,
-                record,
-                decision.revisions,
-                lambda: store.apply_commit(record, decision.revisions),
-            )
+            try:
+                await replicator.push(
+                    held,
+                    record,
+                    decision.revisions,
+                    lambda: store.apply_commit(record, decision.revisions),
+                )
+            except LockNotHeld as exc:
+                raise LockTimeout(
+                    f"the write lease ran out before commit {record.id.short} was staged at "
+                    f"every holder, so it was refused and nothing was written; retry ({exc})"
+                ) from exc
             pushed = True
     finally:
         if decision.record is not None and not pushed:

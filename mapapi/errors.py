@@ -197,3 +197,17 @@ class PeerNotRunning(SwarmError):
     """The command needs the repository's peer daemon, and none runs."""
 
     code = 53
+
+
+class QueryError(MapError):
+    """A lookup or spatial query could not be answered as asked."""
+
+    code = 60
+    exit_code = 2
+
+
+class InvalidBBox(QueryError, ValueError):
+    """A bounding box is malformed: min > max, or a coordinate is NaN or infinite."""
+
+    code = 61
+    exit_code = 2

@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from mapapi.errors import LockNotHeld, LockTimeout, MapError
@@ -55,6 +55,7 @@ class LockService:
         self._timers: dict[ChunkId, asyncio.TimerHandle] = {}
         self._renewals: dict[ChunkId, asyncio.Task[None]] = {}
         self._bookkeeping: set[asyncio.Task[None]] = set()
+        self._closed = False
         # The state machine knows writers by peer id, so two writers of this
         # peer (two transactions, or a commit and a participation) take turns here.
         self._local_writers: dict[ChunkId, asyncio.Lock] = {}
@@ -73,28 +74,38 @@ class LockService:
             cond = self._changed[chunk] = asyncio.Condition()
         return cond
 
-    async def _notify(self, chunk: ChunkId) -> None:
-        """Wake everyone waiting on the chunk's lock and re-arm its expiry timer."""
-        lock = self.table[chunk]
+    def _arm_timer(self, chunk: ChunkId) -> None:
+        """(Re-)arm the chunk's expiry timer for the current lease, if any."""
         timer = self._timers.pop(chunk, None)
         if timer is not None:
             timer.cancel()
-        if lock.grant is not None:
+        grant = self.table[chunk].grant
+        if grant is not None and not self._closed:
             loop = asyncio.get_running_loop()
-            delay = max(0.0, lock.grant.expires - time.monotonic())
+            delay = max(0.0, grant.expires - time.monotonic())
             self._timers[chunk] = loop.call_later(delay, self._expire_soon, chunk)
+
+    async def _notify(self, chunk: ChunkId) -> None:
+        """Wake everyone waiting on the chunk's lock and re-arm its expiry timer."""
+        self._arm_timer(chunk)
         cond = self._condition(chunk)
         async with cond:
             cond.notify_all()
+
+    def _notify_soon(self, chunk: ChunkId) -> None:
+        """`_notify` from code that cannot await (a timer, a cancelled waiter)."""
+        if self._closed:
+            return
+        task = asyncio.get_running_loop().create_task(self._notify(chunk))
+        self._bookkeeping.add(task)
+        task.add_done_callback(self._bookkeeping.discard)
+        task.add_done_callback(_log_failure)
 
     def _expire_soon(self, chunk: ChunkId) -> None:
         """Timer callback: drop the lease if it ran out, and wake the waiters."""
         self._timers.pop(chunk, None)
         self.table[chunk].expire(time.monotonic())
-        task = asyncio.get_running_loop().create_task(self._notify(chunk))
-        self._bookkeeping.add(task)
-        task.add_done_callback(self._bookkeeping.discard)
-        task.add_done_callback(_log_failure)
+        self._notify_soon(chunk)
 
     async def grant_local(self, chunk: ChunkId, writer: PeerId, within: float) -> Grant:
         """Queue `writer` for the chunk's lock here and wait until it is granted.
@@ -104,6 +115,7 @@ class LockService:
         """
         lock = self.table[chunk]
         cond = self._condition(chunk)
+        token_before = lock.grant.token if lock.grant and lock.grant.writer == writer else 0
         try:
             async with asyncio.timeout(within), cond:
                 grant = lock.request(writer, time.monotonic())
@@ -111,19 +123,42 @@ class LockService:
                     await cond.wait()
                     current = lock.grant
                     grant = current if current and current.writer == writer else None
-        except TimeoutError:
+        except BaseException as exc:
+            # Timed out or cancelled (the requester left, the peer closes): withdraw
+            # the request, and give back a grant made meanwhile that nobody will
+            # use, or the chunk would stay locked until that lease ran out.
             lock.cancel(writer)
-            raise LockTimeout(
-                f"chunk {chunk.short}: no write lock for {writer.short} within {within:g} s"
-            ) from None
+            current = lock.grant
+            if current is not None and current.writer == writer and current.token != token_before:
+                lock.release(writer, current.token, time.monotonic())
+                self._notify_soon(chunk)
+            if isinstance(exc, TimeoutError):
+                raise LockTimeout(
+                    f"chunk {chunk.short}: no write lock for {writer.short} within {within:g} s"
+                ) from None
+            raise
         await self._notify(chunk)
+        return grant
+
+    def renew_local(self, chunk: ChunkId, writer: PeerId, token: int) -> Grant:
+        """Extend `writer`'s current lease here.
+
+        Raises:
+            LockNotHeld: the lease under `token` is gone (expired or released).
+        """
+        grant = self.table[chunk].renew(writer, token, time.monotonic())
+        self._arm_timer(chunk)
         return grant
 
     async def release_local(self, chunk: ChunkId, writer: PeerId, token: int) -> None:
         """Release (token > 0) or withdraw (token 0) `writer`'s lock here."""
         lock = self.table[chunk]
         if token == 0:
+            # The writer gave up before it saw a grant: a grant made meanwhile
+            # is unused (its acquires take turns, so it holds nothing else here).
             lock.cancel(writer)
+            if lock.grant is not None and lock.grant.writer == writer:
+                lock.release(writer, lock.grant.token, time.monotonic())
         else:
             lock.release(writer, token, time.monotonic())
         await self._notify(chunk)
@@ -147,10 +182,13 @@ class LockService:
 
     # -- serving other writers ---------------------------------------------------
     async def rpc_lock_request(self, req: Request) -> LockGrant:
-        """Grant a remote writer the lock once it is free here."""
-        chunk = req.body.chunk
-        grant = await self.grant_local(chunk, req.sender, self.lock_timeout)
-        return LockGrant(chunk, grant.token, self.table.lease)
+        """Grant a remote writer the lock once it is free here, or renew its lease."""
+        body: LockRequest = req.body
+        if body.token:
+            grant = self.renew_local(body.chunk, req.sender, body.token)
+        else:
+            grant = await self.grant_local(body.chunk, req.sender, self.lock_timeout)
+        return LockGrant(body.chunk, grant.token, self.table.lease)
 
     async def rpc_unlock(self, req: Request) -> Ack:
         """Release or withdraw a remote writer's lock."""
@@ -169,58 +207,142 @@ class LockService:
         )
         return reply.token
 
-    async def acquire(self, chunk: ChunkId, holders: Sequence[PeerId]) -> Held:
+    async def _renew_one(self, chunk: ChunkId, holder: PeerId, token: int) -> None:
+        if holder == self.me:
+            self.renew_local(chunk, self.me, token)
+            return
+        await self.rpc.request(
+            self.members.address(holder),
+            LockRequest(chunk, token),
+            timeout=self.table.lease / 3,
+            expect=LockGrant,
+        )
+
+    async def acquire(
+        self,
+        chunk: ChunkId,
+        holders: Sequence[PeerId],
+        *,
+        current: Callable[[], Sequence[PeerId]] | None = None,
+        precheck: Callable[[], None] | None = None,
+    ) -> Held:
         """Write-lock `chunk` at every holder: the arbiter first, then the rest
         in parallel (two round trips, not one per holder).
 
+        Args:
+            holders: the chunk's holders as the caller last saw them.
+            current: reads the holder set again. Holders join and leave only under
+                the chunk's write lock, so once the arbiter granted, this peer's
+                copy of the set is up to date; if it changed (a joiner may even
+                be the new arbiter), the grants are handed back and the lock is
+                taken again from the current holders, so a commit reaches every
+                holder and no two writers disagree on the arbiter.
+            precheck: called once the arbiter granted, before the others are asked;
+                if it raises (a commit that the local replica already shows to be
+                in conflict), only the arbiter's grant is handed back, which under
+                contention saves a lock and an unlock at every other holder.
+
         Raises:
             LockTimeout, NetworkError: a holder did not grant; nothing stays held.
+            Whatever `precheck` raises.
         """
-        ordered = sorted(set(holders))
-        held = Held(chunk)
         turn = self._local_writers.setdefault(chunk, asyncio.Lock())
         try:
             async with asyncio.timeout(self.lock_timeout):
                 await turn.acquire()
         except TimeoutError:
             raise LockTimeout(f"chunk {chunk.short}: another local writer kept it") from None
+        held = Held(chunk)
+        ordered = sorted(set(holders))
+        asked: Sequence[PeerId] = ordered[:1]  # where a request of ours may still wait
         try:
-            held.tokens[ordered[0]] = await self._acquire_one(chunk, ordered[0])
-            rest = ordered[1:]
-            tokens = await asyncio.gather(
-                *(self._acquire_one(chunk, h) for h in rest), return_exceptions=True
-            )
-            failures = [t for t in tokens if isinstance(t, BaseException)]
-            for holder, token in zip(rest, tokens, strict=True):
-                if isinstance(token, int):
-                    held.tokens[holder] = token
-            if failures:
-                raise failures[0]
+            while True:
+                try:
+                    held.tokens[ordered[0]] = await self._acquire_one(chunk, ordered[0])
+                except MapError:
+                    if not self._holders_changed(ordered, current):
+                        raise
+                else:
+                    if not self._holders_changed(ordered, current):
+                        if precheck is not None:
+                            precheck()  # raises: only the arbiter's grant goes back
+                        asked = ordered
+                        failure = await self._acquire_rest(held, ordered[1:])
+                        if not self._holders_changed(ordered, current):
+                            if failure is not None:
+                                raise failure
+                            break
+                # A holder joined or left while we waited (a request to one that
+                # left may even have failed): lock the current holders instead.
+                assert current is not None
+                log.debug("holders of %s changed while locking it; locking again", chunk)
+                await self._unlock_all(held, asked)
+                held = Held(chunk)
+                ordered = sorted(set(current()))
+                asked = ordered[:1]
         except BaseException:
-            await self.release(held, withdraw=ordered)
+            await self.release(held, withdraw=asked)
             raise
 
-        self._renewals[chunk] = asyncio.get_running_loop().create_task(self._renew(held))
+        self._renewals[chunk] = asyncio.get_running_loop().create_task(
+            self._renew(held), name=f"renew lock {chunk.short}"
+        )
         return held
 
-    async def _renew(self, held: Held) -> None:
-        """Re-request every lease at a third of its length until released."""
-        while True:
-            await asyncio.sleep(self.table.lease / 3)
-            for holder in held.tokens:
-                try:
-                    await self._acquire_one(held.chunk, holder)
-                except MapError as exc:
-                    log.warning(
-                        "renewing the lease of %s at %s failed: %s", held.chunk, holder, exc
-                    )
+    async def _acquire_rest(self, held: Held, rest: Sequence[PeerId]) -> MapError | None:
+        """Ask every holder but the arbiter in parallel; their tokens go into
+        `held`. Returns the first failure (not raised: the caller decides)."""
+        tokens = await asyncio.gather(
+            *(self._acquire_one(held.chunk, h) for h in rest), return_exceptions=True
+        )
+        failure: MapError | None = None
+        for holder, token in zip(rest, tokens, strict=True):
+            if isinstance(token, int):
+                held.tokens[holder] = token
+            elif isinstance(token, MapError):
+                failure = failure or token
+            elif isinstance(token, BaseException):
+                raise token
+        return failure
 
-    async def release(self, held: Held, withdraw: Sequence[PeerId] = ()) -> None:
-        """Unlock every holder in `held` (and withdraw requests at `withdraw`)."""
+    @staticmethod
+    def _holders_changed(
+        ordered: list[PeerId], current: Callable[[], Sequence[PeerId]] | None
+    ) -> bool:
+        return current is not None and sorted(set(current())) != ordered
+
+    async def _renew(self, held: Held) -> None:
+        """Renew every lease at a third of its length until released; a lease
+        that is gone (expired, taken over) is not renewed again."""
+        live = dict(held.tokens)
+        while live:
+            await asyncio.sleep(self.table.lease / 3)
+            results = await asyncio.gather(
+                *(self._renew_one(held.chunk, h, t) for h, t in live.items()),
+                return_exceptions=True,
+            )
+            for holder, result in zip(list(live), results, strict=True):
+                if isinstance(result, LockNotHeld):
+                    log.warning("lost the lease of %s at %s: %s", held.chunk, holder, result)
+                    del live[holder]
+                elif isinstance(result, MapError):
+                    log.warning(
+                        "renewing the lease of %s at %s failed: %s", held.chunk, holder, result
+                    )
+                elif isinstance(result, BaseException):
+                    raise result
+
+    async def stop_renewing(self, held: Held) -> None:
+        """Stop renewing `held`'s leases (before messages that end them)."""
         renewal = self._renewals.pop(held.chunk, None)
         if renewal is not None:
             renewal.cancel()
+            await asyncio.gather(renewal, return_exceptions=True)
+
+    async def release(self, held: Held, withdraw: Sequence[PeerId] = ()) -> None:
+        """Unlock every holder in `held` (and withdraw requests at `withdraw`)."""
         try:
+            await self.stop_renewing(held)
             await self._unlock_all(held, withdraw)
         finally:
             self._local_writers[held.chunk].release()
@@ -243,6 +365,7 @@ class LockService:
 
     async def close(self) -> None:
         """Stop renewals and timers."""
+        self._closed = True
         for task in self._renewals.values():
             task.cancel()
         await asyncio.gather(*self._renewals.values(), return_exceptions=True)

@@ -11,9 +11,13 @@ from __future__ import annotations
 
 import inspect
 import json
+import os
+import re
+import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from mapapi.errors import ItemNotFound, UsageError
+from mapapi.errors import ItemNotFound, PeerNotRunning, UsageError
 from mapapi.history import change_kind
 from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.transaction import Op
@@ -28,6 +32,8 @@ if TYPE_CHECKING:
 
 Json = Any
 
+_ADDRESS = re.compile(r"tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d+|ipc://\S+")
+
 
 class Operations:
     """The CLI's operations over one peer (see the module docstring)."""
@@ -35,6 +41,7 @@ class Operations:
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
         self.views = Workspace(peer)
+        self.on_shutdown: Callable[[], None] | None = None  # set by the peer daemon
 
     async def call(self, op: str, args: dict[str, Json]) -> Json:
         """Run the operation called `op` with keyword `args` (JSON in, JSON out).
@@ -324,12 +331,132 @@ class Operations:
             )
         return {**self.commit_json(record), "changes": changes}
 
+    # -- the swarm (only while the peer daemon runs) ------------------------------------
+    def _on_swarm(self) -> Peer:
+        if self.peer.swarm is None:
+            raise PeerNotRunning(
+                "no peer runs on this repository; start it with `mapctl peer start --detach` "
+                "(or `mapctl peer start` in another terminal)"
+            )
+        return self.peer
+
+    async def peer_status(self) -> Json:
+        """This peer: id, name, the address others join through, every member."""
+        peer = self._on_swarm()
+        assert peer.swarm is not None
+        members = [
+            {"id": m.id, "address": m.address, "name": m.name} for m in peer.swarm.members.all()
+        ]
+        return {
+            "id": peer.id,
+            "name": peer.name,
+            "address": peer.address,
+            "join": peer.address,
+            "pid": os.getpid(),
+            "members": members,
+            "chunks": len(peer.chunks()),
+        }
+
+    async def peers(self) -> Json:
+        """The other members: id, address, name, seconds since last heard of
+        (None: never heard from directly) and the chunks both peers hold."""
+        peer = self._on_swarm()
+        now = time.monotonic()
+        held = [c.id for c in peer.chunks()]
+        rows = []
+        for state in peer.members():
+            member = state.member
+            seen = state.last_seen
+            rows.append(
+                {
+                    "id": member.id,
+                    "address": member.address,
+                    "name": member.name,
+                    "last_seen": None if seen is None else round(now - seen, 3),
+                    "shared_chunks": [c for c in held if member.id in peer.store.holders(c)],
+                }
+            )
+        return {"peers": rows}
+
+    async def join(self, address: str) -> Json:
+        """Join the swarm through the member listening at `address`."""
+        peer = self._on_swarm()
+        members = await peer.join(check_address(address))
+        return {
+            "joined": address,
+            "members": [{"id": m.id, "address": m.address, "name": m.name} for m in members],
+        }
+
+    async def participate(self, chunk: str) -> Json:
+        """Replicate a chunk here, with its history, from any holder."""
+        peer = self._on_swarm()
+        try:
+            chunk_id = ChunkId(await self.resolve_id("chunk", chunk))
+        except UsageError as exc:
+            raise UsageError(
+                f"{exc}; a chunk this peer does not hold needs its full 32-digit id "
+                "(`mapctl chunk list` on a peer that holds it)"
+            ) from None
+        table = await peer.participate(chunk_id)
+        items = next((c.items for c in peer.chunks() if c.id == chunk_id), 0)
+        return {
+            "chunk": chunk_id,
+            "table": table,
+            "items": items,
+            "holders": peer.holders(chunk_id),
+        }
+
+    async def chunk_leave(self, chunk: str, force: bool = False) -> Json:
+        """Stop replicating a chunk (the last holder needs `force`)."""
+        peer = self._on_swarm()
+        chunk_id = ChunkId(await self.resolve_id("chunk", chunk))
+        peer.chunk_table(chunk_id)  # NotParticipatingError if it is not held here
+        await peer.leave_chunk(chunk_id, force=force)
+        return {"chunk": chunk_id, "left": True}
+
+    async def swarm_chunks(self) -> Json:
+        """Every chunk a member of the swarm (this peer included) holds."""
+        from mapapi.control import ask_chunk_lists
+
+        peer = self._on_swarm()
+        found: dict[str, Json] = {
+            c.id: {"id": c.id, "table": c.table, "holders": [peer.id]} for c in peer.chunks()
+        }
+        for member, chunks in (await ask_chunk_lists(peer)).items():
+            for c in chunks:
+                entry = found.setdefault(
+                    c["id"], {"id": c["id"], "table": c["table"], "holders": []}
+                )
+                entry["holders"].append(member)
+        return {"chunks": [found[k] for k in sorted(found)]}
+
+    async def shutdown(self) -> Json:
+        """Stop the peer daemon gracefully (`mapctl peer stop`)."""
+        if self.on_shutdown is None:
+            raise PeerNotRunning("no peer daemon runs on this repository")
+        self.on_shutdown()
+        return {"stopping": True, "pid": os.getpid()}
+
 
 OPERATIONS = frozenset(
     name
     for name, value in vars(Operations).items()
     if not name.startswith("_") and name != "call" and inspect.iscoroutinefunction(value)
 )
+
+
+def check_address(address: str) -> str:
+    """`address` if it looks like a peer address (tcp://HOST:PORT or ipc://PATH).
+
+    Raises:
+        UsageError: it does not.
+    """
+    if not _ADDRESS.fullmatch(address):
+        raise UsageError(
+            f"bad peer address {address!r}: give what `mapctl peer start` printed, "
+            "e.g. tcp://192.168.1.10:7000"
+        )
+    return address
 
 
 def _match(conflicts: list[Conflict], text: str) -> ItemId:

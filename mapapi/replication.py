@@ -58,6 +58,7 @@ class Replicator:
         self.on_applied = on_applied
         self._staged: dict[tuple[ChunkId, CommitId], tuple[CommitRecord, list[Revision]]] = {}
         self._incoming: dict[ChunkId, list[ChunkPart]] = {}
+        self._wanted: dict[ChunkId, int] = {}  # chunks asked for -> participations waiting
         self.progress: dict[ChunkId, Progress] = {}
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
@@ -77,6 +78,17 @@ class Replicator:
 
     def _member(self, peer: PeerId) -> Member:
         return self.members.get(peer) or Member(peer, "")
+
+    def _holders(self, chunk: ChunkId) -> list[PeerId]:
+        return self.store.holders(chunk) or [self.me]
+
+    async def lock(self, chunk: ChunkId, precheck: Callable[[], None] | None = None) -> Held:
+        """Write-lock `chunk` at all its holders, current when the lock is held
+        (a holder that joined or left while we waited is accounted for);
+        `precheck` as in `LockService.acquire`."""
+        return await self.locks.acquire(
+            chunk, self._holders(chunk), current=lambda: self._holders(chunk), precheck=precheck
+        )
 
     # -- the holder's side of a commit ---------------------------------------------
     def rpc_commit_batch(self, req: Request) -> Ack:
@@ -123,8 +135,9 @@ class Replicator:
         there (which releases their locks). One batch per chunk per holder.
 
         Raises:
-            MapError: a holder refused or did not answer the batch; nothing was
-                applied anywhere (the caller releases the locks).
+            MapError: a holder refused or did not answer the batch, or our own
+                lease ran out (LockNotHeld); nothing was applied anywhere (the
+                caller releases the locks).
         """
         by_chunk: dict[ChunkId, list[Revision]] = {h.chunk: [] for h in held}
         for revision in revisions:
@@ -139,7 +152,12 @@ class Replicator:
             )
             for h, peer, token in remote
         )
+        for h in held:  # our own replica is fenced too: a lapsed lease here stops us
+            if self.me in h.tokens:
+                self.locks.check(h.chunk, self.me, h.tokens[self.me])
         apply_locally()
+        for h in held:  # the apply ends the remote leases: a renewal now would be refused
+            await self.locks.stop_renewing(h)
         results = await asyncio.gather(
             *(
                 self.rpc.request(self.members.address(peer), CommitApply(h.chunk, token, record.id))
@@ -179,11 +197,14 @@ class Replicator:
         chunk: ChunkId = req.body.chunk
         table = self.store.chunk_table(chunk)  # ChunkNotFound if we do not hold it
         newcomer = self._member(req.sender)
-        holders = self.store.holders(chunk)
-        if req.sender in holders:
+        if req.sender in self.store.holders(chunk):
             return Ack()
-        held = await self.locks.acquire(chunk, holders)
+        held = await self.lock(chunk)
         try:
+            # Read again under the lock: another newcomer may have joined meanwhile.
+            holders = self._holders(chunk)
+            if req.sender in holders:
+                return Ack()
             await self._send_state(chunk, table, req.sender, [*holders, req.sender])
             others = [p for p in holders if p != self.me]
             await _all(
@@ -217,6 +238,10 @@ class Replicator:
     def rpc_chunk_part(self, req: Request) -> Ack:
         """Collect the parts of a chunk; install it atomically with the last one."""
         part: ChunkPart = req.body
+        if part.chunk not in self._wanted:
+            # Only a holder we asked sends a chunk's state: anything else would
+            # overwrite a replica (and its holder set) with what a stranger says.
+            raise UsageError(f"chunk {part.chunk.short} was not asked for; part refused")
         parts = self._incoming.setdefault(part.chunk, [])
         if part.part != len(parts):
             self._incoming.pop(part.chunk, None)
@@ -269,6 +294,7 @@ class Replicator:
         found = await self.find_holders(chunk=chunk)
         if progress is not None:
             self.progress[chunk] = progress
+        self._wanted[chunk] = self._wanted.get(chunk, 0) + 1
         try:
             last: MapError | None = None
             for member in found.holders:
@@ -283,6 +309,10 @@ class Replicator:
             raise last or ChunkNotFound(f"no holder of chunk {chunk} answered")
         finally:
             self.progress.pop(chunk, None)
+            self._wanted[chunk] -= 1
+            if not self._wanted[chunk]:
+                del self._wanted[chunk]
+                self._incoming.pop(chunk, None)
 
     async def leave(self, chunk: ChunkId, force: bool = False) -> None:
         """Stop holding `chunk`: tell the other holders under the lock, drop it here.
@@ -291,15 +321,13 @@ class Replicator:
             UsageError: this is the last holder and `force` is not set.
         """
         self.store.chunk_table(chunk)
-        holders = self.store.holders(chunk)
-        others = [p for p in holders if p != self.me]
-        if not others and not force:
-            raise UsageError(
-                f"this peer is the last holder of chunk {chunk.short}; leaving would lose "
-                "its data: pass --force to drop it anyway"
-            )
-        held = await self.locks.acquire(chunk, holders)
+        if self.store.holders(chunk) in ([], [self.me]) and not force:
+            raise self._last_holder(chunk)
+        held = await self.lock(chunk)
         try:
+            others = [p for p in self._holders(chunk) if p != self.me]
+            if not others and not force:  # the others left while we waited
+                raise self._last_holder(chunk)
             me = self.members.me
             await _all(
                 self.rpc.request(
@@ -310,7 +338,17 @@ class Replicator:
             self.store.drop_chunk(chunk)
         finally:
             await self.locks.release(held)
-        self.locks.table.drop(chunk)
+        # The chunk's lock state stays: writers that still count us as a holder
+        # may be queued here, and must get their turn (then see the smaller
+        # holder set and lock again without us) rather than wait for a lock
+        # that no longer exists; the epoch also keeps growing if we come back.
+
+    @staticmethod
+    def _last_holder(chunk: ChunkId) -> UsageError:
+        return UsageError(
+            f"this peer is the last holder of chunk {chunk.short}; leaving would lose "
+            "its data: pass --force to drop it anyway"
+        )
 
     # -- finding holders -------------------------------------------------------------------
     def rpc_holders_query(self, req: Request) -> Holders:

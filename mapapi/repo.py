@@ -3,18 +3,27 @@
 from __future__ import annotations
 
 import json
+import logging
+import os
+import time
 import tomllib
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from mapapi.errors import AlreadyInitialisedError, CorruptRepoError, NotARepoError
+from mapapi.errors import AlreadyInitialisedError, CorruptRepoError, NotARepoError, UsageError
 from mapapi.ids import PeerId
 from mapapi.store.sqlite import SqliteStore
 
 REPO_DIR = ".mapapi"
 CONFIG = "config.toml"
 STORE = "store.sqlite"
+PID_FILE = "peer.pid"  # the running peer daemon: pid, id, addresses (mapapi.daemon)
+PEER_LOCK = "peer.lock"  # held (flock) by the daemon for as long as it runs
+PEER_LOG = "peer.log"  # a detached daemon's stdout and stderr
+CONTROL_SOCKET = "control.sock"  # the daemon's local control endpoint (ipc)
+
+log = logging.getLogger(__name__)
 
 
 def _toml_str(text: str) -> str:
@@ -44,8 +53,41 @@ class RepoConfig:
             raise CorruptRepoError(f"{source} is damaged: {exc}") from exc
 
 
+@dataclass(frozen=True)
+class PeerRecord:
+    """What `.mapapi/peer.pid` says about the running peer daemon (`mapapi.daemon`).
+
+    Attributes:
+        pid: the daemon's process id.
+        id: its peer id.
+        name: its peer name.
+        address: where the swarm reaches it.
+        join: the exact string another peer passes to `--join` (its address).
+        control: its local control endpoint (`mapapi.control`).
+        started: when it started serving (Unix time).
+    """
+
+    pid: int
+    id: str
+    name: str
+    address: str
+    join: str
+    control: str
+    started: float
+
+    def to_json(self) -> str:
+        """The record as one JSON document."""
+        return json.dumps(asdict(self))
+
+
 class Repository:
-    """A map repository folder."""
+    """A map repository folder.
+
+    The peer daemon of a repository holds an exclusive `flock` on
+    `.mapapi/peer.lock` while it runs. That lock, not the pid, tells a live
+    daemon from a stale pid file: the kernel drops it when the process ends,
+    however it ends (SIGKILL, a crash), and a recycled pid cannot fake it.
+    """
 
     def __init__(self, root: Path, config: RepoConfig) -> None:
         self.root = root
@@ -60,6 +102,26 @@ class Repository:
     def store_path(self) -> Path:
         """The SQLite store file."""
         return self.meta_dir / STORE
+
+    @property
+    def pid_path(self) -> Path:
+        """Where the running peer daemon describes itself."""
+        return self.meta_dir / PID_FILE
+
+    @property
+    def lock_path(self) -> Path:
+        """The file the running peer daemon keeps locked."""
+        return self.meta_dir / PEER_LOCK
+
+    @property
+    def log_path(self) -> Path:
+        """A detached peer daemon's log."""
+        return self.meta_dir / PEER_LOG
+
+    @property
+    def control_path(self) -> Path:
+        """The daemon's control socket (when the path fits an ipc endpoint)."""
+        return self.meta_dir / CONTROL_SOCKET
 
     @classmethod
     def init(cls, path: str | Path, name: str | None = None) -> Repository:
@@ -105,3 +167,96 @@ class Repository:
     def open_store(self) -> SqliteStore:
         """Open the repository's store."""
         return SqliteStore(self.store_path)
+
+    # -- the peer daemon's pid file and lock -------------------------------------------
+    def read_peer_record(self) -> PeerRecord | None:
+        """The pid file's record, or None if there is none (or it is unreadable)."""
+        try:
+            return PeerRecord(**json.loads(self.pid_path.read_text(encoding="utf-8")))
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, TypeError) as exc:
+            log.warning("ignoring the unreadable pid file %s: %s", self.pid_path, exc)
+            return None
+
+    def write_peer_record(self, record: PeerRecord) -> None:
+        """Write the pid file atomically (readers see the old file or the new one)."""
+        tmp = self.pid_path.with_name(f"{self.pid_path.name}.{os.getpid()}.tmp")
+        tmp.write_text(record.to_json() + "\n", encoding="utf-8")
+        tmp.replace(self.pid_path)
+
+    def remove_peer_record(self, pid: int | None = None) -> None:
+        """Remove the pid file (only if it is still the one of process `pid`, if given)."""
+        record = self.read_peer_record()
+        if record is not None and pid in (None, record.pid):
+            self.pid_path.unlink(missing_ok=True)
+
+    def peer_locked(self) -> bool:
+        """True while a peer daemon process runs here (it holds `peer.lock`)."""
+        import fcntl
+
+        try:
+            fd = os.open(self.lock_path, os.O_RDONLY)
+        except FileNotFoundError:
+            return False
+        try:
+            # A shared lock is granted unless a daemon holds its exclusive one; this
+            # probe holds it for microseconds (PeerLock.acquire retries meanwhile).
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        finally:
+            os.close(fd)  # also drops the probe's shared lock
+        return False
+
+    def running_peer(self) -> PeerRecord | None:
+        """The record of the peer daemon running here; None when none runs (a stale
+        pid file, left by a process that is gone, counts as none)."""
+        record = self.read_peer_record()
+        return record if record is not None and self.peer_locked() else None
+
+    def stale_peer_record(self) -> PeerRecord | None:
+        """The pid file's record if its daemon is gone, else None."""
+        record = self.read_peer_record()
+        return record if record is not None and not self.peer_locked() else None
+
+
+class PeerLock:
+    """The exclusive lock a peer daemon holds on its repository for its lifetime."""
+
+    def __init__(self, fd: int) -> None:
+        self._fd: int | None = fd
+
+    @classmethod
+    def acquire(cls, repo: Repository, timeout: float = 2.0) -> PeerLock:
+        """Lock `repo` for this process.
+
+        Raises:
+            UsageError: another daemon runs on the repository.
+        """
+        import fcntl
+
+        fd = os.open(repo.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return cls(fd)
+            except BlockingIOError:
+                # A `peer_locked()` probe holds a shared lock for microseconds; a
+                # daemon holds it for good.
+                if time.monotonic() > deadline:
+                    os.close(fd)
+                    record = repo.read_peer_record()
+                    who = f" (pid {record.pid}, {record.address})" if record else ""
+                    raise UsageError(
+                        f"a peer already runs on {repo.root}{who}; "
+                        "stop it with `mapctl peer stop` first"
+                    ) from None
+                time.sleep(0.01)  # sync-ok: waiting out another process's probe
+
+    def release(self) -> None:
+        """Unlock (idempotent)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None

@@ -55,14 +55,19 @@ class Swarm:
     @property
     def address(self) -> str:
         """The endpoint other peers reach this one at."""
-        return self.rpc.address
+        return self.members.me.address or self.rpc.address
 
     async def start(self, listen: str) -> str:
         """Listen on `listen` (port 0 picks a free port); returns the real address."""
         address = await self.rpc.start(listen)
+        self.advertise(address)
+        return address
+
+    def advertise(self, address: str) -> None:
+        """Tell other peers `address` instead of the bound one (before joining):
+        a wildcard host such as tcp://0.0.0.0:7000 is no address they can reach."""
         self.members.me = Member(self._peer_id, address, self._name)
         self.members.add(self.members.me)
-        return address
 
     # -- membership ------------------------------------------------------------------
     def rpc_hello(self, req: Request) -> Welcome:

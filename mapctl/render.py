@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Iterable, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 from rich.console import Console
@@ -99,3 +100,13 @@ def side_by_side(
 def error(text: str) -> None:
     """A red line on stderr."""
     Console(stderr=True, highlight=False).print(Text(text, style="red"))
+
+
+def note(text: str) -> None:
+    """One line for humans on stderr (keeps stdout for what scripts read)."""
+    Console(stderr=True, highlight=False, soft_wrap=True).print(Text(text, style="dim"))
+
+
+def waiting(text: str) -> AbstractContextManager[object]:
+    """A spinner on stderr while a long call runs (nothing when stderr is no terminal)."""
+    return Console(stderr=True, highlight=False).status(text, spinner="dots")

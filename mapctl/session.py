@@ -2,49 +2,95 @@
 
 from __future__ import annotations
 
+from collections.abc import Coroutine
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import click
 
 if TYPE_CHECKING:
-    from mapapi.ops import Operations
+    import asyncio
+
+    from mapapi.peer import Peer
+
+T = TypeVar("T")
+
+
+class Ops(Protocol):
+    """`mapapi.ops.Operations`, or `mapapi.control.RemoteOperations` in a daemon."""
+
+    async def call(self, op: str, args: dict[str, Any]) -> Any:
+        """Run one operation; its JSON result."""
 
 
 class Session:
     """Opens the repository lazily and closes it when the command ends.
 
-    Commands call `call(op, **args)`: one JSON operation of `mapapi.ops`,
-    run on the repository's embedded peer.
+    Commands call `call(op, **args)`: one JSON operation of `mapapi.ops`. While
+    a peer daemon runs on the repository (`mapctl peer start`), every operation
+    goes to it over its control endpoint; otherwise it runs on the repository's
+    embedded peer in this process (DESIGN §9).
     """
 
     def __init__(self, path: Path, view: str, verbose: bool) -> None:
         self.path = path
         self.view = view
         self.verbose = verbose
-        self._ops: Operations | None = None
+        self._ops: Ops | None = None
+        self._peer: Peer | None = None
+        self._runner: asyncio.Runner | None = None
 
     @property
-    def ops(self) -> Operations:
-        """The operations over the repository's peer (opened on first use)."""
+    def ops(self) -> Ops:
+        """The operations: the running daemon's, else the embedded peer's (on first use)."""
         if self._ops is None:
-            from mapapi import Peer
-            from mapapi.ops import Operations
+            from mapapi.repo import Repository
 
-            self._ops = Operations(Peer.open(self.path))
+            repo = Repository.find(self.path)
+            record = repo.running_peer()
+            if record is not None:
+                from mapapi.control import RemoteOperations
+
+                who = f"the peer of {repo.root} (pid {record.pid})"
+                self._ops = RemoteOperations(record.control, who)
+            else:
+                from mapapi.ops import Operations
+                from mapapi.peer import Peer
+
+                self._peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+                self._ops = Operations(self._peer)
         return self._ops
+
+    @property
+    def remote(self) -> bool:
+        """True when the operations go to a running peer daemon."""
+        self.ops  # noqa: B018  (opens it: decides where the operations go)
+        return self._peer is None
+
+    def run(self, coro: Coroutine[Any, Any, T]) -> T:
+        """Run a coroutine on the session's event loop (one loop per command)."""
+        if self._runner is None:
+            import asyncio  # here, not at the top: `mapctl --help` never needs it
+
+            self._runner = asyncio.Runner()
+        return self._runner.run(coro)
 
     def call(self, op: str, **args: Any) -> Any:
         """Run one operation to completion and return its JSON result."""
-        import asyncio  # here, not at the top: `mapctl --help` never needs it
-
-        return asyncio.run(self.ops.call(op, args))
+        return self.run(self.ops.call(op, args))
 
     def close(self) -> None:
-        """Release the repository."""
-        if self._ops is not None:
-            self._ops.peer.store.close()
-            self._ops = None
+        """Release the repository, or the connection to its daemon."""
+        ops, self._ops = self._ops, None
+        close = getattr(ops, "close", None)
+        if close is not None and self._runner is not None:
+            self._runner.run(close())
+        if self._runner is not None:
+            self._runner.close()
+            self._runner = None
+        if self._peer is not None:
+            self._peer.store.close()
+            self._peer = None
 
 
 pass_session = click.make_pass_decorator(Session)

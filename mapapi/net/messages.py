@@ -38,9 +38,14 @@ class Ack:
 
 @dataclass(frozen=True, slots=True)
 class LockRequest:
-    """Ask for a chunk's write lock (the writer is the envelope's sender)."""
+    """Ask for a chunk's write lock (the writer is the envelope's sender).
+
+    `token` 0 asks for the lock; a token renews that lease only, and is refused
+    with LockNotHeld once the lease is gone (never queued again).
+    """
 
     chunk: ChunkId
+    token: int = 0
 
 
 @dataclass(frozen=True, slots=True)

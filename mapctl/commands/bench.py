@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
 from mapctl.session import json_option
@@ -31,6 +33,110 @@ def bench_local(commits: int, directory: str | None, as_json: bool) -> None:
         render.emit_json(result)
     else:
         render.table("bench local", ["measure", "value"], sorted(result.items()))
+
+
+_DIR_OPTION = click.option(
+    "--dir",
+    "directory",
+    type=click.Path(file_okay=False, exists=True),
+    help="Create the peers' scratch repositories here (default: the system temp folder).",
+)
+_UVLOOP_OPTION = click.option(
+    "--uvloop", "use_uvloop", is_flag=True, help="Run every peer's event loop on uvloop."
+)
+
+
+def _render(title: str, result: dict[str, Any], as_json: bool) -> None:
+    from mapctl import render
+
+    if as_json:
+        render.emit_json(result)
+        return
+    rows = [(k, v) for k, v in result.items() if not isinstance(v, dict | list)]
+    render.table(title, ["measure", "value"], rows)
+
+
+@bench.command("viewtest")
+@click.option(
+    "--peers", "-p", default=4, show_default=True, type=click.IntRange(1, 32), help="Processes."
+)
+@click.option(
+    "-n", "n", default=200, show_default=True, type=click.IntRange(1), help="Increments per peer."
+)
+@click.option("--a0", default=0, show_default=True, help="The counter's first value.")
+@_DIR_OPTION
+@_UVLOOP_OPTION
+@json_option
+def bench_viewtest(
+    peers: int, n: int, a0: int, directory: str | None, use_uvloop: bool, as_json: bool
+) -> None:
+    """Paper Algorithm 1: P peer processes each increment one counter N times.
+
+    Every peer retries on conflict; afterwards every peer must read a0 + P*N
+    and hold the same commit log, or the command fails (exit 1).
+    """
+    from mapapi.bench.swarm import check_viewtest, viewtest
+
+    result = viewtest(peers, n, a0=a0, directory=directory, use_uvloop=use_uvloop)
+    _render(f"bench viewtest: {peers} peers x {n}", result, as_json)
+    check_viewtest(result)
+
+
+@bench.command("commit")
+@click.option(
+    "--holders",
+    "-k",
+    default=3,
+    show_default=True,
+    type=click.IntRange(1, 32),
+    help="Peer processes holding the chunk (the writer included).",
+)
+@click.option(
+    "-n", "n", default=500, show_default=True, type=click.IntRange(1), help="Timed commits."
+)
+@click.option(
+    "--writer",
+    type=click.Choice(["other", "arbiter"]),
+    default="other",
+    show_default=True,
+    help="Commit from a holder that is not the arbiter (one more round trip), or from it.",
+)
+@_DIR_OPTION
+@_UVLOOP_OPTION
+@json_option
+def bench_commit(
+    holders: int, n: int, writer: str, directory: str | None, use_uvloop: bool, as_json: bool
+) -> None:
+    """Uncontended commit latency: one writer, a chunk held by K peer processes."""
+    from mapapi.bench.swarm import commit_latency
+
+    result = commit_latency(
+        holders,
+        n,
+        writer="arbiter" if writer == "arbiter" else "other",
+        directory=directory,
+        use_uvloop=use_uvloop,
+    )
+    _render(f"bench commit: {holders} holders", result, as_json)
+
+
+@bench.command("plot")
+@click.argument("kind", type=click.Choice(["viewtest", "commit"]))
+@click.argument("results", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.option(
+    "-o", "--output", required=True, type=click.Path(dir_okay=False), help="The PNG to write."
+)
+def bench_plot(kind: str, results: tuple[str, ...], output: str) -> None:
+    """Plot JSON results (one `--json` object per line in RESULTS) as a PNG.
+
+    viewtest: commits/s and aborts per commit against peers; commit: p50/p99
+    latency and messages per commit against holders. Needs matplotlib (the
+    `dev` extra).
+    """
+    from mapapi.bench.plot import load_results, plot_commit, plot_viewtest
+
+    rows = load_results(results)
+    (plot_viewtest if kind == "viewtest" else plot_commit)(rows, output)
 
 
 def register(cli: click.Group) -> None:

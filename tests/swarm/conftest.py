@@ -1,26 +1,143 @@
-"""Swarm fixtures: real peers on real SQLite repositories, on 127.0.0.1 port 0."""
+"""Swarm fixtures and helpers: real peers on real SQLite repositories, on 127.0.0.1 port 0.
+
+Every peer of a test lives in this one process and event loop; they talk over
+real zmq sockets. A guard fails any test that synchronises with
+`time.sleep` / `asyncio.sleep` (STYLE §7) unless the calling line is marked
+`# sync-ok`: tests await the event that proves a state instead.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
+import asyncio
+import linecache
+import sys
+import time
+from collections.abc import Awaitable, Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
 
 import pytest
 
-from mapapi import Peer
+from mapapi import ChunkId, ConflictError, ItemId, LockTimeout, Peer
+from mapapi._pb.mapapi.v1.types_pb2 import Account, Counter
+from mapapi.swarm import Swarm as PeerSwarm
+
+TABLE = "counters"
+ACCOUNTS = "accounts"
+_HERE = str(Path(__file__).resolve().parent)
+
+MakeSwarm = Callable[..., Awaitable[list[Peer]]]
+
+__all__ = ["ACCOUNTS", "TABLE", "Account", "Counter", "MakeSwarm"]
+
+
+@pytest.fixture(autouse=True)
+def no_sleep_sync(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
+    """Record sleeps called from these tests; fail the test if any is unmarked."""
+    calls: list[str] = []
+    real_async, real_time = asyncio.sleep, time.sleep
+
+    def check(delay: float) -> None:
+        frame = sys._getframe(2)
+        where = frame.f_code.co_filename
+        marked = "# sync-ok" in linecache.getline(where, frame.f_lineno)
+        if delay > 0 and where.startswith(_HERE) and not marked:
+            calls.append(f"{where}:{frame.f_lineno}")
+
+    def async_sleep(delay: float, result: Any = None) -> Any:
+        check(delay)
+        return real_async(delay, result)
+
+    def time_sleep(delay: float) -> None:
+        check(delay)
+        real_time(delay)
+
+    monkeypatch.setattr(asyncio, "sleep", async_sleep)
+    monkeypatch.setattr(time, "sleep", time_sleep)
+    yield calls
+    assert not calls, f"sleep used as synchronisation at {calls}; await an event instead"
 
 
 @pytest.fixture
-def swarm(
-    make_peer: Callable[..., Awaitable[Peer]],
-) -> Callable[[int], Awaitable[list[Peer]]]:
-    """Factory: n started peers, all joined through the first."""
+def swarm(make_peer: Callable[..., Awaitable[Peer]]) -> MakeSwarm:
+    """Factory: n started peers, all joined through the first.
 
-    async def _swarm(n: int, lease: float = 5.0) -> list[Peer]:
+    `lease` is the write-lock lease in seconds; `lock_timeout` how long a
+    writer waits for a grant before `LockTimeout`.
+    """
+
+    async def _swarm(n: int, lease: float = 5.0, lock_timeout: float | None = None) -> list[Peer]:
         peers = [await make_peer() for _ in range(n)]
         for peer in peers:
             await peer.start("tcp://127.0.0.1:0", lease=lease)
+            if lock_timeout is not None:
+                net(peer).locks.lock_timeout = lock_timeout
         for peer in peers[1:]:
             await peer.join(peers[0].address)
         return peers
 
     return _swarm
+
+
+# -- helpers -------------------------------------------------------------------------
+
+
+def net(peer: Peer) -> PeerSwarm:
+    """The networked side of a started peer."""
+    assert peer.swarm is not None, "start the peer first"
+    return peer.swarm
+
+
+async def counter_chunk(
+    peer: Peer, value: int = 0, *, table: str = TABLE, name: str = "c"
+) -> tuple[ChunkId, ItemId]:
+    """A new chunk (creating `table` if needed) holding one counter at `value`."""
+    if table not in peer.store.tables():
+        await peer.create_table(table, Counter)
+    chunk = await peer.create_chunk(table)
+    tx = peer.begin()
+    item = tx.insert(table, Counter(name=name, value=value), chunk)
+    await tx.commit(f"create {name}")
+    return chunk, item
+
+
+async def value(peer: Peer, item: ItemId, at: int | None = None, *, table: str = TABLE) -> int:
+    """A counter's value as a transaction begun now (or at `at`) on `peer` reads it."""
+    message = await peer.begin(at).get(table, item)
+    assert message is not None, f"no item {item.short} on {peer.name}"
+    return int(message.value)
+
+
+async def share(chunk: ChunkId, peers: Sequence[Peer]) -> None:
+    """Make every peer of `peers` a holder of `chunk` (one after the other)."""
+    for peer in peers:
+        await peer.participate(chunk)
+
+
+async def increment(
+    peer: Peer, items: Sequence[tuple[str, ItemId]], message: str = "increment"
+) -> int:
+    """Add 1 to each (table, item) in one transaction, retried on conflicts and
+    lock timeouts until it commits; returns the number of retries."""
+    retries = 0
+    while True:
+        tx = peer.begin()
+        for table, item in items:
+            current = await tx.get(table, item)
+            assert current is not None
+            tx.update(table, item, Counter(name=current.name, value=current.value + 1))
+        try:
+            await tx.commit(message)
+        except (ConflictError, LockTimeout):
+            retries += 1
+            continue
+        return retries
+
+
+async def log_ids(peer: Peer) -> list[str]:
+    """The ids of every commit in a peer's log, newest first, once no writer
+    holds any of its chunks (a writer's commit returns when it sent the
+    apply+unlock, which a holder may not have processed yet)."""
+    for chunk in peer.chunks():
+        await net(peer).locks.wait_readable(chunk.id)
+    return [str(c.id) for c in peer.log()]

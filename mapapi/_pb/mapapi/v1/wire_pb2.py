@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from mapapi._pb.mapapi.v1 import core_pb2 as mapapi_dot_v1_dot_core__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x14mapapi/v1/wire.proto\x12\tmapapi.v1\x1a\x14mapapi/v1/core.proto\"\x96\x08\n\x08\x45nvelope\x12\x12\n\nrequest_id\x18\x01 \x01(\x04\x12\x0e\n\x06sender\x18\x02 \x01(\x0c\x12\x0f\n\x07lamport\x18\x03 \x01(\x04\x12&\n\x04kind\x18\x04 \x01(\x0e\x32\x18.mapapi.v1.Envelope.Kind\x12&\n\x05\x65rror\x18\n \x01(\x0b\x32\x15.mapapi.v1.ErrorReplyH\x00\x12\x1f\n\x04ping\x18\x0b \x01(\x0b\x32\x0f.mapapi.v1.PingH\x00\x12\x1f\n\x04pong\x18\x0c \x01(\x0b\x32\x0f.mapapi.v1.PongH\x00\x12\x1d\n\x03\x61\x63k\x18\r \x01(\x0b\x32\x0e.mapapi.v1.AckH\x00\x12.\n\x0clock_request\x18\x14 \x01(\x0b\x32\x16.mapapi.v1.LockRequestH\x00\x12*\n\nlock_grant\x18\x15 \x01(\x0b\x32\x14.mapapi.v1.LockGrantH\x00\x12#\n\x06unlock\x18\x16 \x01(\x0b\x32\x11.mapapi.v1.UnlockH\x00\x12.\n\x0c\x63ommit_batch\x18( \x01(\x0b\x32\x16.mapapi.v1.CommitBatchH\x00\x12.\n\x0c\x63ommit_apply\x18) \x01(\x0b\x32\x16.mapapi.v1.CommitApplyH\x00\x12.\n\x0c\x63ommit_abort\x18* \x01(\x0b\x32\x16.mapapi.v1.CommitAbortH\x00\x12\x34\n\x0bparticipate\x18< \x01(\x0b\x32\x1d.mapapi.v1.ParticipateRequestH\x00\x12*\n\nchunk_part\x18= \x01(\x0b\x32\x14.mapapi.v1.ChunkPartH\x00\x12\x30\n\rholder_change\x18> \x01(\x0b\x32\x17.mapapi.v1.HolderChangeH\x00\x12\x30\n\rholders_query\x18? \x01(\x0b\x32\x17.mapapi.v1.HoldersQueryH\x00\x12%\n\x07holders\x18@ \x01(\x0b\x32\x12.mapapi.v1.HoldersH\x00\x12!\n\x05hello\x18x \x01(\x0b\x32\x10.mapapi.v1.HelloH\x00\x12%\n\x07welcome\x18y \x01(\x0b\x32\x12.mapapi.v1.WelcomeH\x00\x12\x1d\n\x03\x62ye\x18z \x01(\x0b\x32\x0e.mapapi.v1.ByeH\x00\x12/\n\x0c\x63ontrol_call\x18\x8c\x01 \x01(\x0b\x32\x16.mapapi.v1.ControlCallH\x00\x12\x33\n\x0e\x63ontrol_result\x18\x8d\x01 \x01(\x0b\x32\x18.mapapi.v1.ControlResultH\x00\"O\n\x04Kind\x12\x14\n\x10KIND_UNSPECIFIED\x10\x00\x12\x10\n\x0cKIND_REQUEST\x10\x01\x12\x0e\n\nKIND_REPLY\x10\x02\x12\x0f\n\x0bKIND_NOTIFY\x10\x03\x42\x06\n\x04\x62ody\"+\n\nErrorReply\x12\x0c\n\x04\x63ode\x18\x01 \x01(\r\x12\x0f\n\x07message\x18\x02 \x01(\t\"\x17\n\x04Ping\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"\x17\n\x04Pong\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"\x05\n\x03\x41\x63k\"3\n\x06Member\x12\n\n\x02id\x18\x01 \x01(\x0c\x12\x0f\n\x07\x61\x64\x64ress\x18\x02 \x01(\t\x12\x0c\n\x04name\x18\x03 \x01(\t\"\x1c\n\x0bLockRequest\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\"8\n\tLockGrant\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\r\n\x05lease\x18\x03 \x01(\x01\"&\n\x06Unlock\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\"|\n\x0b\x43ommitBatch\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\'\n\x06record\x18\x03 \x01(\x0b\x32\x17.mapapi.v1.CommitRecord\x12&\n\trevisions\x18\x04 \x03(\x0b\x32\x13.mapapi.v1.Revision\">\n\x0b\x43ommitApply\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\x11\n\tcommit_id\x18\x03 \x01(\x0c\">\n\x0b\x43ommitAbort\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\x11\n\tcommit_id\x18\x03 \x01(\x0c\"#\n\x12ParticipateRequest\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\"\xd8\x01\n\tChunkPart\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12)\n\x05table\x18\x02 \x01(\x0b\x32\x1a.mapapi.v1.TableDescriptor\x12\"\n\x07holders\x18\x03 \x03(\x0b\x32\x11.mapapi.v1.Member\x12&\n\trevisions\x18\x04 \x03(\x0b\x32\x13.mapapi.v1.Revision\x12(\n\x07\x63ommits\x18\x05 \x03(\x0b\x32\x17.mapapi.v1.CommitRecord\x12\x0c\n\x04part\x18\x06 \x01(\r\x12\r\n\x05parts\x18\x07 \x01(\r\"_\n\x0cHolderChange\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12!\n\x06member\x18\x03 \x01(\x0b\x32\x11.mapapi.v1.Member\x12\x0e\n\x06joined\x18\x04 \x01(\x08\"+\n\x0cHoldersQuery\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\x0c\n\x04item\x18\x02 \x01(\x0c\"K\n\x07Holders\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05table\x18\x02 \x01(\t\x12\"\n\x07holders\x18\x03 \x03(\x0b\x32\x11.mapapi.v1.Member\"*\n\x05Hello\x12!\n\x06member\x18\x01 \x01(\x0b\x32\x11.mapapi.v1.Member\"-\n\x07Welcome\x12\"\n\x07members\x18\x01 \x03(\x0b\x32\x11.mapapi.v1.Member\"\x05\n\x03\x42ye\",\n\x0b\x43ontrolCall\x12\n\n\x02op\x18\x01 \x01(\t\x12\x11\n\targs_json\x18\x02 \x01(\t\"\x1d\n\rControlResult\x12\x0c\n\x04json\x18\x01 \x01(\tb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x14mapapi/v1/wire.proto\x12\tmapapi.v1\x1a\x14mapapi/v1/core.proto\"\x96\x08\n\x08\x45nvelope\x12\x12\n\nrequest_id\x18\x01 \x01(\x04\x12\x0e\n\x06sender\x18\x02 \x01(\x0c\x12\x0f\n\x07lamport\x18\x03 \x01(\x04\x12&\n\x04kind\x18\x04 \x01(\x0e\x32\x18.mapapi.v1.Envelope.Kind\x12&\n\x05\x65rror\x18\n \x01(\x0b\x32\x15.mapapi.v1.ErrorReplyH\x00\x12\x1f\n\x04ping\x18\x0b \x01(\x0b\x32\x0f.mapapi.v1.PingH\x00\x12\x1f\n\x04pong\x18\x0c \x01(\x0b\x32\x0f.mapapi.v1.PongH\x00\x12\x1d\n\x03\x61\x63k\x18\r \x01(\x0b\x32\x0e.mapapi.v1.AckH\x00\x12.\n\x0clock_request\x18\x14 \x01(\x0b\x32\x16.mapapi.v1.LockRequestH\x00\x12*\n\nlock_grant\x18\x15 \x01(\x0b\x32\x14.mapapi.v1.LockGrantH\x00\x12#\n\x06unlock\x18\x16 \x01(\x0b\x32\x11.mapapi.v1.UnlockH\x00\x12.\n\x0c\x63ommit_batch\x18( \x01(\x0b\x32\x16.mapapi.v1.CommitBatchH\x00\x12.\n\x0c\x63ommit_apply\x18) \x01(\x0b\x32\x16.mapapi.v1.CommitApplyH\x00\x12.\n\x0c\x63ommit_abort\x18* \x01(\x0b\x32\x16.mapapi.v1.CommitAbortH\x00\x12\x34\n\x0bparticipate\x18< \x01(\x0b\x32\x1d.mapapi.v1.ParticipateRequestH\x00\x12*\n\nchunk_part\x18= \x01(\x0b\x32\x14.mapapi.v1.ChunkPartH\x00\x12\x30\n\rholder_change\x18> \x01(\x0b\x32\x17.mapapi.v1.HolderChangeH\x00\x12\x30\n\rholders_query\x18? \x01(\x0b\x32\x17.mapapi.v1.HoldersQueryH\x00\x12%\n\x07holders\x18@ \x01(\x0b\x32\x12.mapapi.v1.HoldersH\x00\x12!\n\x05hello\x18x \x01(\x0b\x32\x10.mapapi.v1.HelloH\x00\x12%\n\x07welcome\x18y \x01(\x0b\x32\x12.mapapi.v1.WelcomeH\x00\x12\x1d\n\x03\x62ye\x18z \x01(\x0b\x32\x0e.mapapi.v1.ByeH\x00\x12/\n\x0c\x63ontrol_call\x18\x8c\x01 \x01(\x0b\x32\x16.mapapi.v1.ControlCallH\x00\x12\x33\n\x0e\x63ontrol_result\x18\x8d\x01 \x01(\x0b\x32\x18.mapapi.v1.ControlResultH\x00\"O\n\x04Kind\x12\x14\n\x10KIND_UNSPECIFIED\x10\x00\x12\x10\n\x0cKIND_REQUEST\x10\x01\x12\x0e\n\nKIND_REPLY\x10\x02\x12\x0f\n\x0bKIND_NOTIFY\x10\x03\x42\x06\n\x04\x62ody\"+\n\nErrorReply\x12\x0c\n\x04\x63ode\x18\x01 \x01(\r\x12\x0f\n\x07message\x18\x02 \x01(\t\"\x17\n\x04Ping\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"\x17\n\x04Pong\x12\x0f\n\x07payload\x18\x01 \x01(\x0c\"\x05\n\x03\x41\x63k\"3\n\x06Member\x12\n\n\x02id\x18\x01 \x01(\x0c\x12\x0f\n\x07\x61\x64\x64ress\x18\x02 \x01(\t\x12\x0c\n\x04name\x18\x03 \x01(\t\"+\n\x0bLockRequest\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\"8\n\tLockGrant\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\r\n\x05lease\x18\x03 \x01(\x01\"&\n\x06Unlock\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\"|\n\x0b\x43ommitBatch\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\'\n\x06record\x18\x03 \x01(\x0b\x32\x17.mapapi.v1.CommitRecord\x12&\n\trevisions\x18\x04 \x03(\x0b\x32\x13.mapapi.v1.Revision\">\n\x0b\x43ommitApply\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\x11\n\tcommit_id\x18\x03 \x01(\x0c\">\n\x0b\x43ommitAbort\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12\x11\n\tcommit_id\x18\x03 \x01(\x0c\"#\n\x12ParticipateRequest\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\"\xd8\x01\n\tChunkPart\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12)\n\x05table\x18\x02 \x01(\x0b\x32\x1a.mapapi.v1.TableDescriptor\x12\"\n\x07holders\x18\x03 \x03(\x0b\x32\x11.mapapi.v1.Member\x12&\n\trevisions\x18\x04 \x03(\x0b\x32\x13.mapapi.v1.Revision\x12(\n\x07\x63ommits\x18\x05 \x03(\x0b\x32\x17.mapapi.v1.CommitRecord\x12\x0c\n\x04part\x18\x06 \x01(\r\x12\r\n\x05parts\x18\x07 \x01(\r\"_\n\x0cHolderChange\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05token\x18\x02 \x01(\x04\x12!\n\x06member\x18\x03 \x01(\x0b\x32\x11.mapapi.v1.Member\x12\x0e\n\x06joined\x18\x04 \x01(\x08\"+\n\x0cHoldersQuery\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\x0c\n\x04item\x18\x02 \x01(\x0c\"K\n\x07Holders\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05table\x18\x02 \x01(\t\x12\"\n\x07holders\x18\x03 \x03(\x0b\x32\x11.mapapi.v1.Member\"*\n\x05Hello\x12!\n\x06member\x18\x01 \x01(\x0b\x32\x11.mapapi.v1.Member\"-\n\x07Welcome\x12\"\n\x07members\x18\x01 \x03(\x0b\x32\x11.mapapi.v1.Member\"\x05\n\x03\x42ye\",\n\x0b\x43ontrolCall\x12\n\n\x02op\x18\x01 \x01(\t\x12\x11\n\targs_json\x18\x02 \x01(\t\"\x1d\n\rControlResult\x12\x0c\n\x04json\x18\x01 \x01(\tb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -47,35 +47,35 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_MEMBER']._serialized_start=1208
   _globals['_MEMBER']._serialized_end=1259
   _globals['_LOCKREQUEST']._serialized_start=1261
-  _globals['_LOCKREQUEST']._serialized_end=1289
-  _globals['_LOCKGRANT']._serialized_start=1291
-  _globals['_LOCKGRANT']._serialized_end=1347
-  _globals['_UNLOCK']._serialized_start=1349
-  _globals['_UNLOCK']._serialized_end=1387
-  _globals['_COMMITBATCH']._serialized_start=1389
-  _globals['_COMMITBATCH']._serialized_end=1513
-  _globals['_COMMITAPPLY']._serialized_start=1515
-  _globals['_COMMITAPPLY']._serialized_end=1577
-  _globals['_COMMITABORT']._serialized_start=1579
-  _globals['_COMMITABORT']._serialized_end=1641
-  _globals['_PARTICIPATEREQUEST']._serialized_start=1643
-  _globals['_PARTICIPATEREQUEST']._serialized_end=1678
-  _globals['_CHUNKPART']._serialized_start=1681
-  _globals['_CHUNKPART']._serialized_end=1897
-  _globals['_HOLDERCHANGE']._serialized_start=1899
-  _globals['_HOLDERCHANGE']._serialized_end=1994
-  _globals['_HOLDERSQUERY']._serialized_start=1996
-  _globals['_HOLDERSQUERY']._serialized_end=2039
-  _globals['_HOLDERS']._serialized_start=2041
-  _globals['_HOLDERS']._serialized_end=2116
-  _globals['_HELLO']._serialized_start=2118
-  _globals['_HELLO']._serialized_end=2160
-  _globals['_WELCOME']._serialized_start=2162
-  _globals['_WELCOME']._serialized_end=2207
-  _globals['_BYE']._serialized_start=2209
-  _globals['_BYE']._serialized_end=2214
-  _globals['_CONTROLCALL']._serialized_start=2216
-  _globals['_CONTROLCALL']._serialized_end=2260
-  _globals['_CONTROLRESULT']._serialized_start=2262
-  _globals['_CONTROLRESULT']._serialized_end=2291
+  _globals['_LOCKREQUEST']._serialized_end=1304
+  _globals['_LOCKGRANT']._serialized_start=1306
+  _globals['_LOCKGRANT']._serialized_end=1362
+  _globals['_UNLOCK']._serialized_start=1364
+  _globals['_UNLOCK']._serialized_end=1402
+  _globals['_COMMITBATCH']._serialized_start=1404
+  _globals['_COMMITBATCH']._serialized_end=1528
+  _globals['_COMMITAPPLY']._serialized_start=1530
+  _globals['_COMMITAPPLY']._serialized_end=1592
+  _globals['_COMMITABORT']._serialized_start=1594
+  _globals['_COMMITABORT']._serialized_end=1656
+  _globals['_PARTICIPATEREQUEST']._serialized_start=1658
+  _globals['_PARTICIPATEREQUEST']._serialized_end=1693
+  _globals['_CHUNKPART']._serialized_start=1696
+  _globals['_CHUNKPART']._serialized_end=1912
+  _globals['_HOLDERCHANGE']._serialized_start=1914
+  _globals['_HOLDERCHANGE']._serialized_end=2009
+  _globals['_HOLDERSQUERY']._serialized_start=2011
+  _globals['_HOLDERSQUERY']._serialized_end=2054
+  _globals['_HOLDERS']._serialized_start=2056
+  _globals['_HOLDERS']._serialized_end=2131
+  _globals['_HELLO']._serialized_start=2133
+  _globals['_HELLO']._serialized_end=2175
+  _globals['_WELCOME']._serialized_start=2177
+  _globals['_WELCOME']._serialized_end=2222
+  _globals['_BYE']._serialized_start=2224
+  _globals['_BYE']._serialized_end=2229
+  _globals['_CONTROLCALL']._serialized_start=2231
+  _globals['_CONTROLCALL']._serialized_end=2275
+  _globals['_CONTROLRESULT']._serialized_start=2277
+  _globals['_CONTROLRESULT']._serialized_end=2306
 # @@protoc_insertion_point(module_scope)

@@ -105,10 +105,12 @@ class Member(_message.Message):
     def __init__(self, id: _Optional[bytes] = ..., address: _Optional[str] = ..., name: _Optional[str] = ...) -> None: ...
 
 class LockRequest(_message.Message):
-    __slots__ = ("chunk",)
+    __slots__ = ("chunk", "token")
     CHUNK_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
     chunk: bytes
-    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
+    token: int
+    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ...) -> None: ...
 
 class LockGrant(_message.Message):
     __slots__ = ("chunk", "token", "lease")

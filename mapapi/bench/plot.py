@@ -1,0 +1,177 @@
+"""PNG plots of swarm benchmark results (`mapctl bench plot`), with matplotlib.
+
+The input is what `mapctl bench viewtest --json` and `bench commit --json`
+print, one object per line (a JSON-lines file); several runs of the same P or K
+are drawn as points with their median joined by a line. matplotlib is a dev
+dependency and is imported only here.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from collections import defaultdict
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+REDIS_4_CLIENTS = 1_700  # DESIGN §12: Redis 7 WATCH/MULTI, 4 clients, this machine
+TARGET_P4 = 1_500  # issue 3: viewtest with 4 peers
+TARGET_K3_P50_MS = 1.0  # issue 3: uncontended commit with 3 holders
+
+
+def load_results(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
+    """Every JSON object in the given JSON-lines files (blank lines skipped)."""
+    rows = []
+    for path in paths:
+        for line in Path(path).read_text().splitlines():
+            if line.strip():
+                rows.append(json.loads(line))
+    return rows
+
+
+def _by(rows: Sequence[dict[str, Any]], key: str, value: str) -> dict[int, list[float]]:
+    out: dict[int, list[float]] = defaultdict(list)
+    for row in rows:
+        out[int(row[key])].append(float(row[value]))
+    return dict(sorted(out.items()))
+
+
+def _series(ax: Any, points: dict[int, list[float]], label: str, **style: Any) -> None:
+    xs = [x for x, ys in points.items() for _ in ys]
+    ys = [y for _, values in points.items() for y in values]
+    line = ax.plot(
+        list(points), [statistics.median(v) for v in points.values()], label=label, **style
+    )
+    ax.scatter(xs, ys, s=14, alpha=0.5, color=line[0].get_color())
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _caption(rows: Sequence[dict[str, Any]]) -> str:
+    first = rows[0]
+    loads = [r.get("load_1min_before", 0.0) for r in rows]
+    return (
+        f"{first.get('machine', '?')}, Python {first.get('python', '?')}, "
+        f"{first.get('loop', 'asyncio')}, loopback; load before runs <= {max(loads):.2f}"
+    )
+
+
+def _hline(ax: Any, y: float, text: str, **style: Any) -> None:
+    """A horizontal reference line, labelled at the right end."""
+    ax.axhline(y, lw=1, **style)
+    ax.annotate(
+        text,
+        (1.0, y),
+        xycoords=("axes fraction", "data"),
+        xytext=(-4, 3),
+        textcoords="offset points",
+        ha="right",
+        fontsize=8,
+        color=style.get("color", "black"),
+    )
+
+
+def _finish(
+    fig: Any,
+    ax: Any,
+    twin: Any,
+    rows: Sequence[dict[str, Any]],
+    output: str | Path,
+    legend: str = "upper left",
+) -> None:
+    """Legend of both axes, the caption, and the file."""
+    handles = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
+    labels = ax.get_legend_handles_labels()[1] + twin.get_legend_handles_labels()[1]
+    ax.legend(handles, labels, loc=legend, fontsize=8, framealpha=0.9)
+    fig.text(0.01, 0.01, _caption(rows), fontsize=7, color="dimgray")
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    fig.savefig(output)
+
+
+def plot_viewtest(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
+    """Commits/s (and aborts per commit) against the number of peers."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    throughput = _by(rows, "peers", "commits_per_s")
+    _series(ax, throughput, "commits/s (line: median of runs)", marker="o")
+    for peers, values in throughput.items():
+        median = statistics.median(values)
+        ax.annotate(
+            f"{median:,.0f}/s",
+            (peers, median),
+            xytext=(6, 4),
+            textcoords="offset points",
+            fontsize=8,
+            color="tab:blue",
+        )
+    _hline(ax, REDIS_4_CLIENTS, "central Redis WATCH/MULTI, 4 clients", color="grey", ls="--")
+    _hline(ax, TARGET_P4, "target at P = 4", color="tab:red", ls=":")
+    ax.set_xlabel("peer processes P (each commits N increments of one counter)")
+    ax.set_ylabel("commits / s")
+    ax.set_xticks(sorted({int(r["peers"]) for r in rows}))
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    aborts = ax.twinx()
+    _series(
+        aborts,
+        _by(rows, "peers", "aborts_per_commit"),
+        "aborts per commit (right axis)",
+        ls="--",
+        marker="s",
+        color="tab:orange",
+    )
+    aborts.set_ylabel("aborts per commit")
+    aborts.set_ylim(bottom=0)
+    ax.set_title("Algorithm 1 (mapctl bench viewtest): throughput against peers", fontsize=10)
+    _finish(fig, ax, aborts, rows, output, legend="upper center")
+    plt.close(fig)
+
+
+def plot_commit(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
+    """Uncontended commit latency (p50, p99) and messages per commit against holders."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    for writer, color in (("other", "tab:blue"), ("arbiter", "tab:green")):
+        mine = [r for r in rows if r.get("writer", "other") == writer or int(r["holders"]) == 1]
+        if not any(r.get("writer") == writer for r in mine):
+            continue
+        who = "writer not the arbiter" if writer == "other" else "writer is the arbiter"
+        _series(ax, _by(mine, "holders", "p50_ms"), f"p50, {who}", marker="o", color=color)
+        _series(
+            ax,
+            _by(mine, "holders", "p99_ms"),
+            f"p99, {who}",
+            marker="^",
+            ls=":",
+            lw=1,
+            color=color,
+            alpha=0.6,
+        )
+    _hline(ax, TARGET_K3_P50_MS, "target: p50 at K = 3", color="tab:red", ls=":")
+    ax.set_xlabel("holders K (peer processes replicating the chunk, the writer included)")
+    ax.set_ylabel("commit latency, ms")
+    ax.set_xticks(sorted({int(r["holders"]) for r in rows}))
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    messages = ax.twinx()
+    _series(
+        messages,
+        _by(rows, "holders", "messages_per_commit"),
+        "messages per commit (right axis)",
+        ls="--",
+        marker="s",
+        color="grey",
+    )
+    messages.set_ylabel("messages per commit, all peers")
+    messages.set_ylim(bottom=0)
+    ax.set_title("Uncontended commit (mapctl bench commit): latency against holders", fontsize=10)
+    _finish(fig, ax, messages, rows, output)
+    plt.close(fig)

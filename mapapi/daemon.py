@@ -1,0 +1,350 @@
+"""The peer daemon of a repository: `mapctl peer start` (DESIGN §9).
+
+`serve()` opens the repository, puts its peer on the network, joins the
+given members, serves the local control endpoint (`mapapi.control`) and
+writes `.mapapi/peer.pid` (atomically, once everything serves), then runs
+until it is told to stop: SIGTERM, SIGINT or SIGHUP (with `run()`), or the
+`shutdown` operation that `mapctl peer stop` sends. Stopping is graceful: no
+new control calls, Bye to every member, sockets closed, pid file removed.
+While it runs it holds the repository's `PeerLock` (see `mapapi.repo`), which
+tells a live daemon from a stale pid file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import signal
+import socket
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+from urllib.parse import urlsplit
+
+from mapapi.errors import MapError, PeerNotRunning, RequestTimeout, UsageError
+from mapapi.repo import PeerLock, PeerRecord
+
+if TYPE_CHECKING:
+    from mapapi.control import ControlServer
+    from mapapi.peer import Peer
+    from mapapi.repo import Repository
+
+log = logging.getLogger(__name__)
+
+START_TIMEOUT = 30.0
+"""Seconds `--detach` waits for the daemon to serve."""
+STOP_TIMEOUT = 20.0
+"""Seconds `peer stop` waits for a graceful stop before it sends SIGTERM (then as long again)."""
+_POLL = 0.02  # seconds between looks at another process's state
+_WILDCARD_HOSTS = frozenset({"0.0.0.0", "*"})
+_DETACHED: list[subprocess.Popen[bytes]] = []  # daemons this process started
+
+
+def refuse_if_running(repo: Repository) -> None:
+    """Raise if a peer daemon runs on `repo`.
+
+    Raises:
+        UsageError: one does.
+    """
+    current = repo.running_peer()
+    if current is not None:
+        raise UsageError(
+            f"a peer already runs on {repo.root} (pid {current.pid}, {current.address}); "
+            "stop it with `mapctl peer stop` first"
+        )
+
+
+# -- the advertised address --------------------------------------------------------------
+def advertised_address(bound: str, seeds: Sequence[str] = ()) -> str:
+    """The address others reach a peer at that listens on `bound`.
+
+    A wildcard host (`tcp://0.0.0.0:7000`, `tcp://*:7000`) is no address another
+    machine can connect to, so it is replaced by this machine's IPv4 address on
+    the route to the first seed (or, with no seed, on the default route; the
+    loopback address when there is none). Other addresses are returned as is.
+    """
+    parts = urlsplit(bound)
+    if parts.scheme != "tcp" or parts.hostname not in _WILDCARD_HOSTS or parts.port is None:
+        return bound
+    target = ("192.0.2.1", 9)  # TEST-NET-1: only picks a route, nothing is sent
+    for seed in seeds:
+        seed_parts = urlsplit(seed)
+        if seed_parts.hostname and seed_parts.hostname not in _WILDCARD_HOSTS:
+            target = (seed_parts.hostname, seed_parts.port or 9)
+            break
+    host = "127.0.0.1"
+    with contextlib.suppress(OSError), socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.connect(target)  # UDP connect sends nothing; it asks the routing table
+        host = probe.getsockname()[0]
+    return f"tcp://{host}:{parts.port}"
+
+
+# -- serving ------------------------------------------------------------------------------
+async def _join_all(peer: Peer, seeds: Sequence[str]) -> None:
+    """Join through each seed; fail only if every one fails."""
+    failures: list[MapError] = []
+    for seed in seeds:
+        try:
+            await peer.join(seed)
+        except MapError as exc:
+            log.warning("joining through %s failed: %s", seed, exc)
+            failures.append(exc)
+    if seeds and len(failures) == len(seeds):
+        raise failures[-1]
+
+
+async def serve(
+    repo: Repository,
+    listen: str = "tcp://127.0.0.1:0",
+    join: Sequence[str] = (),
+    *,
+    advertise: str | None = None,
+    stop: asyncio.Event | None = None,
+    ready: Callable[[PeerRecord], None] | None = None,
+    lease: float = 5.0,
+) -> None:
+    """Run the peer of `repo` until `stop` is set (or a `shutdown` operation).
+
+    Args:
+        repo: the repository.
+        listen: the swarm endpoint; port 0 picks a free port.
+        join: addresses of members to join through.
+        advertise: the address to tell other peers (default: the bound one,
+            see `advertised_address`).
+        stop: set it to stop gracefully.
+        ready: called with the pid file's record once everything serves.
+        lease: seconds a write lock lasts unless renewed.
+
+    Raises:
+        UsageError: a peer already runs on the repository.
+        NetworkError: `listen` cannot be bound, or no seed answered.
+    """
+    from mapapi.control import ControlServer
+    from mapapi.ops import Operations
+    from mapapi.peer import Peer
+
+    stop = stop or asyncio.Event()
+    lock = PeerLock.acquire(repo)
+    try:
+        peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+        ops = Operations(peer)
+        ops.on_shutdown = stop.set
+        control = ControlServer(ops)
+        record: PeerRecord | None = None
+        try:
+            record = await _go_live(repo, control, listen, join, advertise, lease)
+            if ready is not None:
+                ready(record)
+            await stop.wait()
+            log.info("peer %s stopping", peer.id.short)
+        finally:
+            control.stopping = True  # answer "stopping" while the members hear Bye
+            await peer.close()
+            await control.close()
+            if record is not None:
+                repo.remove_peer_record(record.pid)
+    finally:
+        lock.release()
+
+
+async def _go_live(
+    repo: Repository,
+    control: ControlServer,
+    listen: str,
+    join: Sequence[str],
+    advertise: str | None,
+    lease: float,
+) -> PeerRecord:
+    """Start the peer, join, serve the control endpoint, write the pid file."""
+    from mapapi.control import serve_peer_queries
+
+    peer = control.ops.peer
+    bound = await peer.start(listen, lease=lease)
+    assert peer.swarm is not None
+    address = advertise or advertised_address(bound, join)
+    if address != bound:
+        peer.swarm.advertise(address)
+    await _join_all(peer, join)
+    endpoint = await control.start(repo)
+    serve_peer_queries(peer.swarm.rpc, control.ops)
+    record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
+    repo.write_peer_record(record)
+    log.info("peer %s serves %s (control %s)", peer.id.short, address, endpoint)
+    return record
+
+
+def run(
+    repo: Repository,
+    listen: str = "tcp://127.0.0.1:0",
+    join: Sequence[str] = (),
+    *,
+    advertise: str | None = None,
+    ready: Callable[[PeerRecord], None] | None = None,
+) -> None:
+    """`serve()` in its own event loop until SIGTERM, SIGINT, SIGHUP or `shutdown`.
+
+    Raises:
+        UsageError: a peer already runs on the repository.
+    """
+    refuse_if_running(repo)  # before touching signals: say it plainly
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        signals = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+        for sig in signals:
+            loop.add_signal_handler(sig, stop.set)
+        try:
+            await serve(repo, listen, join, advertise=advertise, stop=stop, ready=ready)
+        finally:
+            for sig in signals:
+                loop.remove_signal_handler(sig)
+
+    asyncio.run(main())
+
+
+# -- controlling a daemon from another process ------------------------------------
+def _log_tail(repo: Repository) -> str:
+    try:
+        lines = repo.log_path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return ""
+    errors = [line for line in lines if line.startswith("error:")]
+    return (errors or [line for line in lines if line.strip()] or [""])[-1]
+
+
+def spawn_detached(
+    repo: Repository,
+    argv: Sequence[str],
+    timeout: float = START_TIMEOUT,
+) -> PeerRecord:
+    """Start `argv` (a command that serves `repo` in the foreground) as a daemon in
+    a new session, its output appended to `.mapapi/peer.log`; return its record
+    once it serves and answers on its control endpoint.
+
+    Raises:
+        UsageError: a peer already runs on the repository.
+        PeerNotRunning: the daemon exited before it served.
+        RequestTimeout: it did not serve within `timeout` seconds (it is killed).
+    """
+    refuse_if_running(repo)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    with open(repo.log_path, "ab") as out:
+        proc = subprocess.Popen(
+            list(argv),
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            cwd=repo.root,
+            env=env,
+            start_new_session=True,  # no terminal's SIGINT/SIGHUP reaches it
+        )
+    try:
+        record = _await_record(repo, proc, timeout)
+        _ping(record, repo)
+    except BaseException:
+        _end(proc)
+        raise
+    _DETACHED.append(proc)  # it outlives this call on purpose: no "still running" warning
+    return record
+
+
+def _await_record(repo: Repository, proc: subprocess.Popen[bytes], timeout: float) -> PeerRecord:
+    deadline = time.monotonic() + timeout
+    while True:
+        code = proc.poll()
+        if code is not None:
+            raise PeerNotRunning(
+                f"the peer exited (status {code}) before it served: {_log_tail(repo)} "
+                f"(see {repo.log_path})"
+            )
+        record = repo.read_peer_record()
+        if record is not None and record.pid == proc.pid:
+            return record
+        if time.monotonic() > deadline:
+            raise RequestTimeout(
+                f"the peer did not serve within {timeout:g} s; see {repo.log_path}"
+            )
+        time.sleep(_POLL)  # sync-ok: polling another process's state
+
+
+def _ping(record: PeerRecord, repo: Repository) -> None:
+    from mapapi.control import RemoteOperations
+
+    async def ping() -> None:
+        remote = RemoteOperations(record.control, f"the peer of {repo.root} (pid {record.pid})")
+        try:
+            await remote.ping()
+        finally:
+            await remote.close()
+
+    asyncio.run(ping())
+
+
+def _end(proc: subprocess.Popen[bytes]) -> None:
+    """Stop a child that failed to start: SIGTERM, then SIGKILL."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5.0)
+
+
+def stop_daemon(repo: Repository, timeout: float = STOP_TIMEOUT) -> PeerRecord | None:
+    """Stop the daemon of `repo` gracefully; returns its record, or None if none ran
+    (a stale pid file is removed).
+
+    Asks through the control endpoint first, then, if the daemon is still there
+    after `timeout` seconds, sends SIGTERM and waits as long again.
+
+    Raises:
+        RequestTimeout: the daemon did not stop.
+    """
+    record = repo.read_peer_record()
+    if record is None or not repo.peer_locked():
+        if record is not None:
+            log.info("removing the stale pid file of pid %d", record.pid)
+            repo.remove_peer_record(record.pid)
+        return None
+    try:
+        _call(record, repo, "shutdown")
+    except MapError as exc:  # not answering: fall back to the signal below
+        log.warning("the peer did not take the shutdown call: %s", exc)
+    if not _wait_unlocked(repo, timeout):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(record.pid, signal.SIGTERM)
+        if not _wait_unlocked(repo, timeout):
+            raise RequestTimeout(
+                f"the peer (pid {record.pid}) did not stop within {2 * timeout:g} s; "
+                f"`kill -9 {record.pid}` ends it (its pid file is then stale and ignored)"
+            )
+    return record
+
+
+def _call(record: PeerRecord, repo: Repository, op: str) -> object:
+    from mapapi.control import RemoteOperations
+
+    async def call() -> object:
+        remote = RemoteOperations(
+            record.control, f"the peer of {repo.root} (pid {record.pid})", timeout=5.0
+        )
+        try:
+            return await remote.call(op, {})
+        finally:
+            await remote.close()
+
+    return asyncio.run(call())
+
+
+def _wait_unlocked(repo: Repository, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while repo.peer_locked():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(_POLL)  # sync-ok: polling another process's state
+    return True

@@ -1,0 +1,340 @@
+"""The swarm: `peer start|stop|status`, `peers`, `join`, `clone`, `chunk participate|leave`."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from mapctl.session import Session, json_option, pass_session
+
+if TYPE_CHECKING:
+    from mapapi.repo import PeerRecord, Repository
+
+_LISTEN_HELP = (
+    "The swarm endpoint; port 0 picks a free port, and tcp://0.0.0.0:PORT listens on "
+    "every interface (for peers on other machines)."
+)
+
+
+def _repo(session: Session) -> Repository:
+    from mapapi.repo import Repository
+
+    return Repository.find(session.path)
+
+
+def _start_argv(
+    repo: Repository, listen: str, joins: tuple[str, ...], advertise: str | None, verbose: bool
+) -> list[str]:
+    """The command a detached daemon runs: this CLI's `peer start` in the foreground."""
+    argv = [sys.executable, "-m", "mapctl", "-C", str(repo.root)]
+    argv += ["-v"] if verbose else []
+    argv += ["peer", "start", "--listen", listen]
+    for address in joins:
+        argv += ["--join", address]
+    if advertise:
+        argv += ["--advertise", advertise]
+    return argv
+
+
+def _announce(record: PeerRecord, as_json: bool) -> None:
+    """Print what scripts read from `peer start`: the address, or its JSON."""
+    from mapctl import render
+
+    if as_json:
+        render.emit_json({"id": record.id, "address": record.address, "join": record.join})
+    else:
+        render.line(record.address)
+    sys.stdout.flush()
+
+
+@click.group("peer")
+def peer() -> None:
+    """Run this repository's peer: the daemon other peers and `mapctl` talk to."""
+
+
+@peer.command("start")
+@click.option("--listen", default="tcp://127.0.0.1:0", show_default=True, help=_LISTEN_HELP)
+@click.option(
+    "--join", "joins", multiple=True, metavar="ADDR", help="Join the swarm through ADDR (repeat)."
+)
+@click.option(
+    "--advertise",
+    metavar="ADDR",
+    help="The address to tell other peers (default: the bound one; a 0.0.0.0 host "
+    "becomes this machine's address on the route to the first --join peer).",
+)
+@click.option("--detach", is_flag=True, help="Run in the background; return once it serves.")
+@json_option
+@pass_session
+def peer_start(
+    session: Session,
+    listen: str,
+    joins: tuple[str, ...],
+    advertise: str | None,
+    detach: bool,
+    as_json: bool,
+) -> None:
+    """Start the peer: print the address others pass to `--join`, then serve.
+
+    With --json print {"id", "address", "join"}. In the foreground it serves until
+    Ctrl-C (or `mapctl peer stop`); with --detach it returns once the peer serves.
+    """
+    from mapapi import daemon
+    from mapapi.ops import check_address
+    from mapctl import render
+
+    repo = _repo(session)
+    for address in (listen, *joins, *([advertise] if advertise else [])):
+        check_address(address)
+    if detach:
+        argv = _start_argv(repo, listen, joins, advertise, session.verbose)
+        record = daemon.spawn_detached(repo, argv)
+        _announce(record, as_json)
+        render.note(
+            f"peer {record.name} runs in the background (pid {record.pid}); "
+            f"log: {repo.log_path}; `mapctl peer stop` stops it"
+        )
+        return
+    logging.basicConfig(
+        level=logging.DEBUG if session.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+
+    def ready(record: PeerRecord) -> None:
+        _announce(record, as_json)
+        if not as_json:
+            render.note(f"peer {record.name} serves (pid {record.pid}); Ctrl-C stops it")
+
+    daemon.run(repo, listen, joins, advertise=advertise, ready=ready)
+
+
+@peer.command("stop")
+@json_option
+@pass_session
+def peer_stop(session: Session, as_json: bool) -> None:
+    """Stop the running peer gracefully (it says goodbye to the swarm)."""
+    from mapapi import daemon
+    from mapctl import render
+
+    repo = _repo(session)
+    stale = repo.stale_peer_record()
+    record = daemon.stop_daemon(repo)
+    if as_json:
+        render.emit_json(
+            {
+                "stopped": record is not None,
+                "pid": record.pid if record else None,
+                "id": record.id if record else None,
+            }
+        )
+    elif record is not None:
+        render.line(f"stopped peer {record.name} (pid {record.pid})")
+    elif stale is not None:
+        render.line(f"no peer runs on {repo.root} (removed the stale pid file of {stale.pid})")
+    else:
+        render.line(f"no peer runs on {repo.root}")
+
+
+@peer.command("status")
+@json_option
+@pass_session
+def peer_status(session: Session, as_json: bool) -> None:
+    """Show whether the peer runs, its id, addresses and the swarm's members."""
+    from mapctl import render
+
+    record = _repo(session).running_peer()
+    info: dict[str, Any] = {"running": False}
+    if record is not None:
+        info = {"running": True, **session.call("peer_status"), "control": record.control}
+    if as_json:
+        render.emit_json(info)
+    elif not info["running"]:
+        render.line("no peer runs here; `mapctl peer start --detach` starts one")
+    else:
+        render.line(f"peer {info['name']} {info['id']} (pid {info['pid']})")
+        render.line(f"  join:    {info['join']}")
+        render.line(f"  control: {info['control']}")
+        render.line(f"  swarm:   {len(info['members'])} member(s), {info['chunks']} chunk(s) here")
+
+
+def _ago(seconds: float | None) -> str:
+    return "never" if seconds is None else f"{seconds:.1f} s ago"
+
+
+@click.command("peers")
+@json_option
+@pass_session
+def peers(session: Session, as_json: bool) -> None:
+    """List the other peers of the swarm: id, address, last seen, shared chunks."""
+    from mapctl import render
+
+    info = session.call("peers")
+    if as_json:
+        render.emit_json(info)
+        return
+    render.table(
+        "peers",
+        ["id", "name", "address", "last seen", "shared chunks"],
+        [
+            (p["id"][:8], p["name"], p["address"], _ago(p["last_seen"]), len(p["shared_chunks"]))
+            for p in info["peers"]
+        ],
+    )
+
+
+@click.command("join")
+@click.argument("address", metavar="ADDR")
+@json_option
+@pass_session
+def join(session: Session, address: str, as_json: bool) -> None:
+    """Connect the running peer to the swarm of the peer at ADDR."""
+    from mapctl import render
+
+    info = session.call("join", address=address)
+    if as_json:
+        render.emit_json(info)
+    else:
+        render.line(f"joined the swarm through {address}: {len(info['members'])} peer(s)")
+
+
+def _participate(session: Session, chunk_id: str) -> dict[str, Any]:
+    from mapctl import render
+
+    with render.waiting(f"fetching chunk {chunk_id[:8]} with its history..."):
+        result: dict[str, Any] = session.call("participate", chunk=chunk_id)
+    return result
+
+
+@click.command("participate")
+@click.argument("chunk_id", metavar="ID")
+@json_option
+@pass_session
+def chunk_participate(session: Session, chunk_id: str, as_json: bool) -> None:
+    """Replicate chunk ID here: fetch it with its history, then receive every commit."""
+    from mapctl import render
+
+    info = _participate(session, chunk_id)
+    if as_json:
+        render.emit_json(info)
+    else:
+        render.line(
+            f"participating in chunk {info['chunk']} ({info['table']}, {info['items']} items, "
+            f"{len(info['holders'])} holders)",
+            "green",
+        )
+
+
+@click.command("leave")
+@click.argument("chunk_id", metavar="ID")
+@click.option("--force", is_flag=True, help="Leave even as the last holder (drops the data).")
+@json_option
+@pass_session
+def chunk_leave(session: Session, chunk_id: str, force: bool, as_json: bool) -> None:
+    """Stop replicating chunk ID (the last holder needs --force)."""
+    from mapctl import render
+
+    info = session.call("chunk_leave", chunk=chunk_id, force=force)
+    if as_json:
+        render.emit_json(info)
+    else:
+        render.line(f"left chunk {info['chunk']}")
+
+
+def _chunk_choice(values: tuple[str, ...]) -> list[str] | None:
+    """The chunk ids `--chunks` names; None means all."""
+    from mapapi import UsageError
+
+    specs = [s.strip() for v in values for s in v.split(",") if s.strip()] or ["all"]
+    if len(specs) > 1 and {"all", "none"} & set(specs):
+        raise UsageError("--chunks takes all, none, or chunk ids; not a mix")
+    if specs == ["all"]:
+        return None
+    return [] if specs == ["none"] else specs
+
+
+@click.command("clone")
+@click.argument("address", metavar="ADDR")
+@click.argument("directory", metavar="DIR", type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--chunks",
+    "chunks",
+    multiple=True,
+    metavar="all|none|ID",
+    help="Which chunks to replicate: all (default), none, or ids (repeat, or comma-separated).",
+)
+@click.option("--listen", default="tcp://127.0.0.1:0", show_default=True, help=_LISTEN_HELP)
+@click.option("--name", help="A name for the new peer (default: the folder's name).")
+@json_option
+@pass_session
+def clone(
+    session: Session,
+    address: str,
+    directory: Path,
+    chunks: tuple[str, ...],
+    listen: str,
+    name: str | None,
+    as_json: bool,
+) -> None:
+    """Make DIR a new peer of the swarm at ADDR: init, start its peer, join, participate."""
+    from mapapi import MapError, Repository, daemon
+    from mapapi.ops import check_address
+    from mapctl import render
+
+    check_address(address)
+    check_address(listen)
+    wanted = _chunk_choice(chunks)
+    existed = directory.exists()
+    repo = Repository.init(directory, name)
+    try:
+        argv = _start_argv(repo, listen, (address,), None, session.verbose)
+        record = daemon.spawn_detached(repo, argv)
+    except BaseException:
+        import shutil
+
+        # nothing but an empty repository was made: leave no half-made clone behind
+        shutil.rmtree(repo.root if not existed else repo.meta_dir, ignore_errors=True)
+        raise
+    sub = Session(repo.root, session.view, session.verbose)
+    try:
+        if wanted is None:
+            wanted = [c["id"] for c in sub.call("swarm_chunks")["chunks"]]
+        done = [_participate(sub, chunk_id) for chunk_id in wanted]
+    except MapError:
+        render.note(
+            f"the peer of {repo.root} keeps running; retry with `mapctl -C {repo.root} chunk "
+            "participate ID`, or stop it with `mapctl peer stop`"
+        )
+        raise
+    finally:
+        sub.close()
+    if as_json:
+        render.emit_json(
+            {
+                "path": str(repo.root),
+                "id": record.id,
+                "address": record.address,
+                "join": record.join,
+                "chunks": done,
+            }
+        )
+    else:
+        items = sum(c["items"] for c in done)
+        render.line(
+            f"cloned {address} into {repo.root}: peer {record.name} at {record.address}, "
+            f"{len(done)} chunk(s), {items} item(s)",
+            "green",
+        )
+
+
+def register(cli: click.Group) -> None:
+    """Add this module's commands to `cli` (and `participate`/`leave` to `chunk`)."""
+    for command in (peer, peers, join, clone):
+        cli.add_command(command)
+    chunk = cli.commands["chunk"]
+    assert isinstance(chunk, click.Group), "register the repo commands first"
+    chunk.add_command(chunk_participate)
+    chunk.add_command(chunk_leave)
