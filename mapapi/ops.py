@@ -42,6 +42,7 @@ class Operations:
         self.peer = peer
         self.views = Workspace(peer)
         self.on_shutdown: Callable[[], None] | None = None  # set by the peer daemon
+        self._progress: dict[str, tuple[int, int]] = {}  # chunk -> (parts received, parts)
 
     async def call(self, op: str, args: dict[str, Json]) -> Json:
         """Run the operation called `op` with keyword `args` (JSON in, JSON out).
@@ -397,7 +398,15 @@ class Operations:
                 f"{exc}; a chunk this peer does not hold needs its full 32-digit id "
                 "(`mapctl chunk list` on a peer that holds it)"
             ) from None
-        table = await peer.participate(chunk_id)
+
+        def report(received: int, parts: int) -> None:
+            self._progress[chunk] = (received, parts)
+
+        self._progress[chunk] = (0, 0)
+        try:
+            table = await peer.participate(chunk_id, report)
+        finally:
+            self._progress.pop(chunk, None)
         items = next((c.items for c in peer.chunks() if c.id == chunk_id), 0)
         return {
             "chunk": chunk_id,
@@ -405,6 +414,12 @@ class Operations:
             "items": items,
             "holders": peer.holders(chunk_id),
         }
+
+    async def participate_progress(self, chunk: str) -> Json:
+        """How far a running `participate(chunk)` got: parts received of all parts
+        (0 of 0 before the first part, or when none runs)."""
+        received, parts = self._progress.get(chunk, (0, 0))
+        return {"chunk": chunk, "received": received, "parts": parts}
 
     async def chunk_leave(self, chunk: str, force: bool = False) -> Json:
         """Stop replicating a chunk (the last holder needs `force`)."""

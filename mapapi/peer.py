@@ -8,6 +8,8 @@ reaches every holder. It holds no protocol logic of its own and delegates to
 
 from __future__ import annotations
 
+import asyncio
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,6 +32,8 @@ if TYPE_CHECKING:
     from mapapi.net.messages import Member
     from mapapi.replication import Progress
     from mapapi.swarm import Swarm
+
+log = logging.getLogger(__name__)
 
 
 class Peer:
@@ -58,8 +62,18 @@ class Peer:
         return cls(MemoryStore())
 
     async def close(self) -> None:
-        """Leave the swarm gracefully (if on one) and release the store."""
+        """Leave the swarm gracefully (if on one) and release the store.
+
+        The peer leaves the holder sets of the chunks it shares, keeping its
+        replicas, so the others go on committing; `rejoin()` after the next
+        `start()` and `join()` makes it a holder again.
+        """
         if self.swarm is not None:
+            try:
+                async with asyncio.timeout(self.swarm.locks.lock_timeout):
+                    await self.swarm.replicator.detach_all()
+            except TimeoutError:
+                log.warning("stopping without leaving every shared chunk (holders unreachable)")
             await self.swarm.leave()
             await self.swarm.close()
             self.swarm = None
@@ -95,6 +109,11 @@ class Peer:
     async def join(self, seed: str) -> list[Member]:
         """Join the swarm through the member listening at `seed`; returns every member."""
         return await self._on_swarm().join(seed)
+
+    async def rejoin(self) -> list[ChunkId]:
+        """Hold again the chunks this peer shared before it stopped, catching up on
+        what the others committed meanwhile; returns those chunks."""
+        return await self._on_swarm().replicator.rejoin()
 
     def members(self) -> list[MemberState]:
         """The other members of the swarm, with when each was last heard of."""

@@ -280,8 +280,14 @@ class Replicator:
         self.store.set_holders(body.chunk, sorted(holders))
         return Ack()
 
-    async def participate(self, chunk: ChunkId, progress: Progress | None = None) -> str:
+    async def participate(
+        self, chunk: ChunkId, progress: Progress | None = None, *, again: bool = False
+    ) -> str:
         """Become a holder of `chunk`, fetching it with its history from a holder.
+
+        Args:
+            again: ask even though the local records list this peer as a holder
+                (it stopped and the others took it out of their holder sets).
 
         Returns:
             The chunk's table.
@@ -289,7 +295,7 @@ class Replicator:
         Raises:
             ChunkNotFound: no known member holds it.
         """
-        if self.me in self.store.holders(chunk):
+        if not again and self.me in self.store.holders(chunk):
             return self.store.chunk_table(chunk)
         found = await self.find_holders(chunk=chunk)
         if progress is not None:
@@ -314,19 +320,27 @@ class Replicator:
                 del self._wanted[chunk]
                 self._incoming.pop(chunk, None)
 
-    async def leave(self, chunk: ChunkId, force: bool = False) -> None:
+    async def leave(self, chunk: ChunkId, force: bool = False, *, keep: bool = False) -> None:
         """Stop holding `chunk`: tell the other holders under the lock, drop it here.
 
+        Args:
+            force: leave even as the last holder (its data is lost).
+            keep: keep the local replica and its recorded holder set (a peer
+                that stops gracefully; `rejoin` makes it a holder again).
+
         Raises:
-            UsageError: this is the last holder and `force` is not set.
+            UsageError: this is the last holder and neither `force` nor `keep` is set.
         """
         self.store.chunk_table(chunk)
-        if self.store.holders(chunk) in ([], [self.me]) and not force:
-            raise self._last_holder(chunk)
+        if self.store.holders(chunk) in ([], [self.me]):
+            if keep:
+                return
+            if not force:
+                raise self._last_holder(chunk)
         held = await self.lock(chunk)
         try:
             others = [p for p in self._holders(chunk) if p != self.me]
-            if not others and not force:  # the others left while we waited
+            if not others and not (force or keep):  # the others left while we waited
                 raise self._last_holder(chunk)
             me = self.members.me
             await _all(
@@ -335,13 +349,36 @@ class Replicator:
                 )
                 for p in others
             )
-            self.store.drop_chunk(chunk)
+            if not keep:
+                self.store.drop_chunk(chunk)
         finally:
             await self.locks.release(held)
         # The chunk's lock state stays: writers that still count us as a holder
         # may be queued here, and must get their turn (then see the smaller
         # holder set and lock again without us) rather than wait for a lock
         # that no longer exists; the epoch also keeps growing if we come back.
+
+    async def detach_all(self) -> None:
+        """Leave every chunk shared with others but keep the replicas (graceful stop),
+        so the others go on committing without this peer."""
+        for info in self.store.chunks():
+            try:
+                await self.leave(info.id, keep=True)
+            except MapError as exc:
+                log.warning("could not leave %s cleanly: %s", info.id.short, exc)
+
+    async def rejoin(self) -> list[ChunkId]:
+        """Become a holder again of every chunk this peer shared when it stopped
+        (fetching what others committed meanwhile); returns those chunks."""
+        back = []
+        for info in self.store.chunks():
+            if [p for p in self.store.holders(info.id) if p != self.me]:
+                try:
+                    await self.participate(info.id, again=True)
+                    back.append(info.id)
+                except MapError as exc:
+                    log.warning("could not rejoin %s: %s", info.id.short, exc)
+        return back
 
     @staticmethod
     def _last_holder(chunk: ChunkId) -> UsageError:

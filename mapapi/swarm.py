@@ -92,7 +92,11 @@ class Swarm:
             NetworkError: the seed did not answer in time.
         """
         hello = Hello(self.members.me)
-        welcome = await self.rpc.request(seed, hello, expect=Welcome)
+        try:
+            welcome = await self.rpc.request(seed, hello, expect=Welcome)
+        except MapError:
+            await self.rpc.forget(seed)  # no reconnecting socket left behind
+            raise
         if not any(m.address == seed or m.id != self._peer_id for m in welcome.members):
             raise JoinRefused(f"{seed} answered with no members")
         fresh = [m for m in welcome.members if m.id != self._peer_id and self.members.add(m)]

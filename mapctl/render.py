@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterable, Sequence
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from rich.console import Console
@@ -107,6 +107,28 @@ def note(text: str) -> None:
     Console(stderr=True, highlight=False, soft_wrap=True).print(Text(text, style="dim"))
 
 
-def waiting(text: str) -> AbstractContextManager[object]:
-    """A spinner on stderr while a long call runs (nothing when stderr is no terminal)."""
-    return Console(stderr=True, highlight=False).status(text, spinner="dots")
+@contextmanager
+def transfer(text: str) -> Iterator[Callable[[int, int], None]]:
+    """A spinner on stderr that becomes a progress bar once the work reports
+    more than one part (nothing shown when stderr is no terminal).
+
+    Yields:
+        `show(done, total)`, to call with each progress report.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    progress = Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=Console(stderr=True, highlight=False),
+        transient=True,
+    )
+    task = progress.add_task(text, total=None)
+
+    def show(done: int, total: int) -> None:
+        if total > 1:
+            progress.update(task, completed=done, total=total)
+
+    with progress:
+        yield show

@@ -1,0 +1,43 @@
+"""A peer that stops gracefully leaves its shared chunks; restarted, it catches up."""
+
+from __future__ import annotations
+
+from mapapi import Peer
+from mapapi.store import SqliteStore
+
+from .conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, net, share, value
+
+
+class TestGracefulStop:
+    async def test_others_commit_after_a_holder_stops_and_it_catches_up(
+        self, swarm: MakeSwarm
+    ) -> None:
+        a, b = await swarm(2)
+        chunk, item = await counter_chunk(a)
+        await share(chunk, [b])
+        await increment(b, [(TABLE, item)])
+        assert isinstance(b.store, SqliteStore)
+        path, b_id = b.store.path, b.id
+        await b.close()
+        assert a.holders(chunk) == [a.id]
+        await increment(a, [(TABLE, item)])  # would fail while b is still a holder
+
+        again = Peer(SqliteStore(path), b_id)
+        try:
+            await again.start("tcp://127.0.0.1:0")
+            await again.join(a.address)
+            assert await again.rejoin() == [chunk]
+            assert set(a.holders(chunk)) == {a.id, b_id}
+            assert await value(again, item) == 2
+            await increment(again, [(TABLE, item)])
+            assert await value(a, item) == 3
+            assert await log_ids(again) == await log_ids(a)
+        finally:
+            await again.close()
+
+    async def test_a_stopping_last_holder_keeps_its_chunk(self, swarm: MakeSwarm) -> None:
+        (a,) = await swarm(1)
+        chunk, _ = await counter_chunk(a)
+        await net(a).replicator.detach_all()
+        assert chunk in {c.id for c in a.chunks()}
+        assert a.holders(chunk) == [a.id]

@@ -1,0 +1,35 @@
+"""A large chunk travels in parts, reported to a progress callback, installed at once."""
+
+from __future__ import annotations
+
+import pytest
+
+from mapapi import replication
+from mapapi.ops import Operations
+
+from .conftest import TABLE, Counter, MakeSwarm, counter_chunk
+
+
+class TestChunkInParts:
+    async def test_parts_are_reported_and_everything_arrives(
+        self, swarm: MakeSwarm, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        monkeypatch.setattr(replication, "PART_REVISIONS", 3)
+        a, b = await swarm(2)
+        chunk, _ = await counter_chunk(a)
+        tx = a.begin()
+        for i in range(9):
+            tx.insert(TABLE, Counter(name=f"c{i}", value=i), chunk)
+        await tx.commit("ten items")
+        seen: list[tuple[int, int]] = []
+        await b.participate(chunk, lambda done, parts: seen.append((done, parts)))
+        assert seen == [(1, 4), (2, 4), (3, 4), (4, 4)]
+        assert len(await b.begin().items(TABLE, chunk)) == 10
+
+    async def test_progress_op_reports_nothing_when_idle(self, swarm: MakeSwarm) -> None:
+        a, b = await swarm(2)
+        chunk, _ = await counter_chunk(a)
+        ops = Operations(b)
+        assert (await ops.call("participate", {"chunk": chunk}))["items"] == 1
+        idle = await ops.call("participate_progress", {"chunk": chunk})
+        assert (idle["received"], idle["parts"]) == (0, 0)
