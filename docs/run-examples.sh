@@ -9,9 +9,31 @@
 # with the project's Python at the point where it appears. ```text and ```console
 # blocks are output and transcripts: shown, not run. A command that is meant to
 # fail is written `cmd || echo "exit $?"` in the page itself.
+#
+# A page must stop the peer daemons it starts (`mapctl -C DIR peer stop`). Any
+# daemon still running in the page's folder afterwards is stopped here, and the
+# page fails; so does a page whose script fails, which leaves its folder for a look.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 export PATH="$here/.venv/bin:$PATH"
+
+# Stop every peer daemon that still runs in a repository under $1 (say which);
+# returns 1 if there was one.
+stop_peers() {
+    local pidfile repo left=0
+    while IFS= read -r pidfile; do
+        repo=$(dirname "$(dirname "$pidfile")")
+        if mapctl -C "$repo" peer status --json 2> /dev/null | grep -q '"running": true'; then
+            echo "== a peer daemon was left running in $repo; stopping it" >&2
+            mapctl -C "$repo" peer stop > /dev/null || true
+            left=1
+        fi
+    done < <(find "$1" -path '*/.mapapi/peer.pid' 2> /dev/null)
+    return $left
+}
+
+work=""
+trap '[ -z "$work" ] || stop_peers "$work" || true' EXIT
 pages=("$@")
 [ ${#pages[@]} -gt 0 ] || pages=("$here"/docs/guide/*.md)
 for page in "${pages[@]}"; do
@@ -26,7 +48,16 @@ for page in "${pages[@]}"; do
         mode == "python" { print > file }
     ' "$page" > "$script"
     echo "== $page (in $work)"
-    (cd "$work" && bash -euo pipefail -x "$script")
+    status=0
+    (cd "$work" && bash -euo pipefail -x "$script") || status=$?
+    if ! stop_peers "$work" && [ "$status" = 0 ]; then
+        status=1
+    fi
+    if [ "$status" != 0 ]; then
+        echo "== $page failed (status $status); its folder is kept: $work" >&2
+        exit "$status"
+    fi
     rm -rf "$work"
+    work=""
 done
 echo "== all examples ran"

@@ -168,8 +168,6 @@ async def _go_live(
     if address != bound:
         peer.swarm.advertise(address)
     await _join_all(peer, join)
-    if join:
-        await peer.rejoin()
     endpoint = await control.start(repo)
     serve_peer_queries(peer.swarm.rpc, control.ops)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())

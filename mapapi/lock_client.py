@@ -48,6 +48,8 @@ class LockService:
         lock_timeout: float = DEFAULT_LOCK_TIMEOUT,
     ) -> None:
         self.rpc = rpc
+        # Who may ask for a chunk's lock (the swarm admits its holders only).
+        self.admit: Callable[[ChunkId, PeerId], None] | None = None
         self.members = members
         self.table = LockTable(lease)
         self.lock_timeout = lock_timeout
@@ -187,6 +189,8 @@ class LockService:
         if body.token:
             grant = self.renew_local(body.chunk, req.sender, body.token)
         else:
+            if self.admit is not None:
+                self.admit(body.chunk, req.sender)
             grant = await self.grant_local(body.chunk, req.sender, self.lock_timeout)
         return LockGrant(body.chunk, grant.token, self.table.lease)
 

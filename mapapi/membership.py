@@ -53,7 +53,10 @@ class Members:
         """
         state = self._known.get(peer)
         if state is None:
-            raise PeerUnavailable(f"peer {peer.short} is not a known member of the swarm")
+            raise PeerUnavailable(
+                f"peer {peer.short} is not a known member of the swarm; "
+                "join it first (`mapctl join ADDR`)"
+            )
         return state.member.address
 
     def get(self, peer: PeerId) -> Member | None:

@@ -404,7 +404,7 @@ class Operations:
 
         self._progress[chunk] = (0, 0)
         try:
-            table = await peer.participate(chunk_id, report)
+            table = await peer.participate(chunk_id, report, again=True)
         finally:
             self._progress.pop(chunk, None)
         items = next((c.items for c in peer.chunks() if c.id == chunk_id), 0)

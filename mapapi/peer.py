@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from mapapi.clock import LamportClock
 from mapapi.commit import commit_distributed, commit_locally
-from mapapi.errors import ChunkNotFound, NotParticipatingError, UsageError
+from mapapi.errors import ChunkNotFound, NotParticipatingError, PeerNotRunning, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.repo import Repository
@@ -107,8 +107,13 @@ class Peer:
         return self._on_swarm().address
 
     async def join(self, seed: str) -> list[Member]:
-        """Join the swarm through the member listening at `seed`; returns every member."""
-        return await self._on_swarm().join(seed)
+        """Join the swarm through the member listening at `seed`; returns every member.
+
+        A peer that shared chunks before it stopped holds them again (`rejoin`).
+        """
+        members = await self._on_swarm().join(seed)
+        await self.rejoin()
+        return members
 
     async def rejoin(self) -> list[ChunkId]:
         """Hold again the chunks this peer shared before it stopped, catching up on
@@ -119,10 +124,14 @@ class Peer:
         """The other members of the swarm, with when each was last heard of."""
         return self._on_swarm().members.others()
 
-    async def participate(self, chunk_id: ChunkId, progress: Progress | None = None) -> str:
+    async def participate(
+        self, chunk_id: ChunkId, progress: Progress | None = None, *, again: bool = False
+    ) -> str:
         """Replicate `chunk_id` here: fetch it with its history from a holder, under
-        its write lock, and receive every later commit. Returns the chunk's table."""
-        return await self._on_swarm().replicator.participate(chunk_id, progress)
+        its write lock, and receive every later commit. Returns the chunk's table.
+
+        With `again`, a chunk held already is fetched anew (to catch up)."""
+        return await self._on_swarm().replicator.participate(chunk_id, progress, again=again)
 
     async def leave_chunk(self, chunk_id: ChunkId, *, force: bool = False) -> None:
         """Stop replicating `chunk_id` (the last holder needs `force`)."""
@@ -262,6 +271,7 @@ class Peer:
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply a transaction (see `mapapi.commit`)."""
         if self.swarm is None:
+            self._refuse_shared(tx)
             return commit_locally(self.store, tx, message, self.clock, self._try_merge)
         return await commit_distributed(
             self.store,
@@ -272,6 +282,16 @@ class Peer:
             self.clock,
             self._try_merge,
         )
+
+    def _refuse_shared(self, tx: Transaction) -> None:
+        """Alone, a commit may not touch a chunk other peers hold: they would never
+        see it (DESIGN §5: every commit reaches every holder)."""
+        for chunk in sorted({c.chunk_id for c in tx.changes}):
+            if any(p != self.id for p in self.store.holders(chunk)):
+                raise PeerNotRunning(
+                    f"chunk {chunk.short} is shared with other peers; commit through the "
+                    "running peer (`mapctl peer start --join ADDR`)"
+                )
 
     def _try_merge(self, ours: Change, theirs: Revision, base: Revision | None) -> bytes | None:
         policy = self._policies.get(ours.table)

@@ -13,7 +13,14 @@ import asyncio
 import logging
 from collections.abc import Callable, Sequence
 
-from mapapi.errors import ChunkNotFound, LockNotHeld, MapError, NoPeersError, UsageError
+from mapapi.errors import (
+    ChunkNotFound,
+    LockNotHeld,
+    MapError,
+    NoPeersError,
+    NotParticipatingError,
+    UsageError,
+)
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.lock_client import Held, LockService
@@ -193,17 +200,17 @@ class Replicator:
     # -- participation -------------------------------------------------------------------
     async def rpc_participate(self, req: Request) -> Ack:
         """Make the sender a holder: send it the full chunk under the write lock,
-        tell the other holders, then release."""
+        tell the other holders, then release. A sender that is a holder already
+        gets the full state again (it may have missed commits), nothing else."""
         chunk: ChunkId = req.body.chunk
         table = self.store.chunk_table(chunk)  # ChunkNotFound if we do not hold it
         newcomer = self._member(req.sender)
-        if req.sender in self.store.holders(chunk):
-            return Ack()
         held = await self.lock(chunk)
         try:
-            # Read again under the lock: another newcomer may have joined meanwhile.
+            # Read under the lock: another newcomer may have joined meanwhile.
             holders = self._holders(chunk)
             if req.sender in holders:
+                await self._send_state(chunk, table, req.sender, holders)
                 return Ack()
             await self._send_state(chunk, table, req.sender, [*holders, req.sender])
             others = [p for p in holders if p != self.me]
@@ -295,7 +302,8 @@ class Replicator:
         Raises:
             ChunkNotFound: no known member holds it.
         """
-        if not again and self.me in self.store.holders(chunk):
+        holders = self.store.holders(chunk)
+        if (not again and self.me in holders) or holders == [self.me]:
             return self.store.chunk_table(chunk)
         found = await self.find_holders(chunk=chunk)
         if progress is not None:
@@ -379,6 +387,19 @@ class Replicator:
                 except MapError as exc:
                     log.warning("could not rejoin %s: %s", info.id.short, exc)
         return back
+
+    def admit(self, chunk: ChunkId, writer: PeerId) -> None:
+        """Refuse a write lock to a peer this holder does not count as a holder
+        (its commits would not reach every replica).
+
+        Raises:
+            NotParticipatingError: `writer` is not in this peer's holder set.
+        """
+        if writer not in self.store.holders(chunk):
+            raise NotParticipatingError(
+                f"peer {self.me.short} does not count {writer.short} as a holder of chunk "
+                f"{chunk.short}; `mapctl chunk participate {chunk}` there to hold it again"
+            )
 
     @staticmethod
     def _last_holder(chunk: ChunkId) -> UsageError:

@@ -47,6 +47,7 @@ class Swarm:
         self.members = Members(Member(peer_id, "", name))
         self.locks = LockService(self.rpc, self.members, lease=lease)
         self.replicator = Replicator(self.rpc, self.members, self.locks, store, on_applied)
+        self.locks.admit = self.replicator.admit
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from mapapi import Peer
+import pytest
+
+from mapapi import NotParticipatingError, Peer
+from mapapi.errors import PeerNotRunning
 from mapapi.store import SqliteStore
 
 from .conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, net, share, value
@@ -41,3 +44,36 @@ class TestGracefulStop:
         await net(a).replicator.detach_all()
         assert chunk in {c.id for c in a.chunks()}
         assert a.holders(chunk) == [a.id]
+
+
+class TestStaleHolders:
+    async def test_a_peer_alone_refuses_to_commit_to_a_shared_chunk(self, swarm: MakeSwarm) -> None:
+        a, b = await swarm(2)
+        chunk, item = await counter_chunk(a)
+        await share(chunk, [b])
+        assert isinstance(b.store, SqliteStore)
+        path, b_id = b.store.path, b.id
+        await b.close()
+        alone = Peer(SqliteStore(path), b_id)  # no swarm: its commits would reach nobody
+        try:
+            tx = alone.begin()
+            current = await tx.get(TABLE, item)
+            assert current is not None
+            tx.update(TABLE, item, type(current)(name="c", value=99))
+            with pytest.raises(PeerNotRunning, match="shared with other peers"):
+                await tx.commit("offline edit")
+        finally:
+            await alone.close()
+        assert await value(a, item) == 0
+
+    async def test_a_holder_refuses_the_lock_to_a_peer_it_does_not_list(
+        self, swarm: MakeSwarm
+    ) -> None:
+        a, b, c = await swarm(3)
+        chunk, item = await counter_chunk(a)
+        await share(chunk, [b])
+        with pytest.raises(NotParticipatingError, match="participate"):
+            await net(c).locks.acquire(chunk, [a.id, b.id])
+        # c got no lease anywhere, so a holder's commit goes straight through.
+        await increment(b, [(TABLE, item)])
+        assert await value(a, item) == 1
