@@ -21,7 +21,14 @@ from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.lock_client import Held, LockService
 from mapapi.replication import Replicator
 from mapapi.store.base import ReplicaStore, Store
-from mapapi.transaction import MergeFn, Transaction, build_revisions, validate
+from mapapi.transaction import (
+    Change,
+    Conflict,
+    MergeFn,
+    Transaction,
+    build_revisions,
+    validate,
+)
 
 Applied = Callable[[CommitRecord, list[Revision]], None]
 
@@ -42,17 +49,7 @@ def _decide(
     Raises:
         ConflictError: with (base, ours, theirs) for every conflicting item.
     """
-    changes = tx.changes
-    read_ids = _read_ids(store, tx)
-    latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
-    accepted, conflicts = validate(
-        changes,
-        latest,
-        tx.since,
-        read_set=read_ids,
-        try_merge=try_merge,
-        base_of=lambda item_id: store.read(item_id, tx.begin_time),
-    )
+    accepted, latest, conflicts = _validate(store, tx, try_merge)
     clock.advance_to(store.clock())
     if conflicts:
         raise ConflictError(conflicts, tx, resolved_at=store.clock())
@@ -73,10 +70,19 @@ def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
     nothing, since this replica may lag until every holder granted; `_decide`
     validates for real then.
     """
+    _, _, conflicts = _validate(store, tx, try_merge)
+    if conflicts:
+        raise ConflictError(conflicts, tx, resolved_at=store.clock())
+
+
+def _validate(
+    store: Store, tx: Transaction, try_merge: MergeFn | None
+) -> tuple[list[Change], dict[ItemId, Revision], list[Conflict]]:
+    """Run the pure validation on this replica: (accepted changes, newest revisions, conflicts)."""
     changes = tx.changes
     read_ids = _read_ids(store, tx)
     latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
-    _, conflicts = validate(
+    accepted, conflicts = validate(
         changes,
         latest,
         tx.since,
@@ -84,8 +90,7 @@ def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
         try_merge=try_merge,
         base_of=lambda item_id: store.read(item_id, tx.begin_time),
     )
-    if conflicts:
-        raise ConflictError(conflicts, tx, resolved_at=store.clock())
+    return accepted, latest, conflicts
 
 
 def _read_ids(store: Store, tx: Transaction) -> set[ItemId]:

@@ -9,42 +9,24 @@ exactly 1 + 3*K commits (paper Algorithm 1 over the CLI, DESIGN §9).
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from .conftest import COMMAND_TIMEOUT, MAPCTL, run_mapctl
+
 WORKERS, K, A0 = 3, 10, 5
 EXIT_CONFLICT = 3
-COMMAND_TIMEOUT = 30.0
 
 pytestmark = pytest.mark.slow
 
 
-def mapctl_path() -> str:
-    found = shutil.which("mapctl", path=str(Path(sys.executable).parent)) or shutil.which("mapctl")
-    assert found, "mapctl is not installed next to the test interpreter"
-    return found
-
-
-MAPCTL = mapctl_path()
-
-
 def mapctl(repo: Path, *args: str, view: str = "main", ok: tuple[int, ...] = (0,)) -> Any:
     """Run one `mapctl -C repo --view VIEW ...`; the completed process (checked against `ok`)."""
-    done = subprocess.run(
-        [MAPCTL, "-C", str(repo), "--view", view, *args],
-        capture_output=True,
-        text=True,
-        timeout=COMMAND_TIMEOUT,
-        check=False,
-    )
-    assert done.returncode in ok, f"mapctl {' '.join(args)} exited {done.returncode}: {done.stderr}"
-    return done
+    return run_mapctl(repo, *args, view=view, ok=ok)
 
 
 def increment(repo: Path, view: str, item_id: str) -> int:

