@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from mapapi.membership import MemberState
     from mapapi.merge import MergePolicy
     from mapapi.net.messages import Member
+    from mapapi.net.shaping import Shaper
     from mapapi.replication import Progress
     from mapapi.swarm import Swarm
 
@@ -80,18 +81,21 @@ class Peer:
         self.store.close()
 
     # -- the swarm -----------------------------------------------------------------
-    async def start(self, listen: str = "tcp://127.0.0.1:0", *, lease: float = 5.0) -> str:
+    async def start(
+        self, listen: str = "tcp://127.0.0.1:0", *, lease: float = 5.0, shaper: Shaper | None = None
+    ) -> str:
         """Put this peer on the network; returns the address others join through.
 
         Args:
             listen: a zmq endpoint; port 0 picks a free port.
             lease: seconds a write lock lasts unless renewed.
+            shaper: simulated latency and bandwidth per link, for experiments.
         """
         from mapapi.swarm import Swarm  # the network stack loads only when needed
 
         if self.swarm is not None:
             raise UsageError(f"peer already listens on {self.swarm.address}")
-        swarm = Swarm(self.id, self.name, self.store, self.clock, lease=lease)
+        swarm = Swarm(self.id, self.name, self.store, self.clock, lease=lease, shaper=shaper)
         address = await swarm.start(listen)
         self.swarm = swarm
         return address

@@ -21,6 +21,7 @@ from mapapi.membership import Members
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
 from mapapi.net.rpc import Request, Rpc
+from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.replication import Replicator
 from mapapi.store.base import ReplicaStore
@@ -39,9 +40,10 @@ class Swarm:
         clock: LamportClock,
         *,
         lease: float = 5.0,
+        shaper: Shaper | None = None,
         on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
     ) -> None:
-        self.rpc = Rpc(ZmqTransport(peer_id, clock))
+        self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
         self._name = name
         self._peer_id = peer_id
         self.members = Members(Member(peer_id, "", name))

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
+
 import pytest
 
-from mapapi import replication
+from mapapi import Peer, replication
+from mapapi.net import LinkShape, Shaper
 from mapapi.ops import Operations
 
-from .conftest import TABLE, Counter, MakeSwarm, counter_chunk
+from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, increment, net, value
+
+MakePeer = Callable[..., Awaitable[Peer]]
 
 
 class TestChunkInParts:
@@ -33,3 +38,19 @@ class TestChunkInParts:
         assert (await ops.call("participate", {"chunk": chunk}))["items"] == 1
         idle = await ops.call("participate_progress", {"chunk": chunk})
         assert (idle["received"], idle["parts"]) == (0, 0)
+
+
+class TestShapedLinks:
+    async def test_commits_replicate_over_slow_links(self, make_peer: MakePeer) -> None:
+        a, b = await make_peer(), await make_peer()
+        slow = LinkShape(latency=0.005, bandwidth=1_000_000)
+        await a.start(shaper=Shaper(slow))
+        await b.start(shaper=Shaper(slow))
+        await b.join(a.address)
+        chunk, item = await counter_chunk(a)
+        await b.participate(chunk)
+        await increment(b, [(TABLE, item)])
+        assert await value(a, item) == 1
+        sent = net(b).rpc.transport.stats.sent_by_type()
+        assert sent["commit_batch"].messages == 1  # b's one commit staged at a, over the slow link
+        assert sent["commit_apply"].messages == 1
