@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from google.protobuf.message import DecodeError
 
-from mapapi._pb.mapapi.v1 import core_pb2, types_pb2
+from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
 from mapapi.errors import CorruptRepoError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.transaction import Change, Conflict, Op
 from mapapi.view import View
 
-_GENERATED = (core_pb2, types_pb2)
+_GENERATED = (core_pb2, maps_pb2, types_pb2)  # registers every mapapi.v1 type
 
 
 def ensure_registered() -> None:

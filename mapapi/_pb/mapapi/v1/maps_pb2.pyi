@@ -1,0 +1,136 @@
+from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class Box3(_message.Message):
+    __slots__ = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+    XMIN_FIELD_NUMBER: _ClassVar[int]
+    YMIN_FIELD_NUMBER: _ClassVar[int]
+    ZMIN_FIELD_NUMBER: _ClassVar[int]
+    XMAX_FIELD_NUMBER: _ClassVar[int]
+    YMAX_FIELD_NUMBER: _ClassVar[int]
+    ZMAX_FIELD_NUMBER: _ClassVar[int]
+    xmin: float
+    ymin: float
+    zmin: float
+    xmax: float
+    ymax: float
+    zmax: float
+    def __init__(self, xmin: _Optional[float] = ..., ymin: _Optional[float] = ..., zmin: _Optional[float] = ..., xmax: _Optional[float] = ..., ymax: _Optional[float] = ..., zmax: _Optional[float] = ...) -> None: ...
+
+class Point3(_message.Message):
+    __slots__ = ("x", "y", "z")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ...) -> None: ...
+
+class Pose3(_message.Message):
+    __slots__ = ("x", "y", "z", "qx", "qy", "qz", "qw")
+    X_FIELD_NUMBER: _ClassVar[int]
+    Y_FIELD_NUMBER: _ClassVar[int]
+    Z_FIELD_NUMBER: _ClassVar[int]
+    QX_FIELD_NUMBER: _ClassVar[int]
+    QY_FIELD_NUMBER: _ClassVar[int]
+    QZ_FIELD_NUMBER: _ClassVar[int]
+    QW_FIELD_NUMBER: _ClassVar[int]
+    x: float
+    y: float
+    z: float
+    qx: float
+    qy: float
+    qz: float
+    qw: float
+    def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ..., qx: _Optional[float] = ..., qy: _Optional[float] = ..., qz: _Optional[float] = ..., qw: _Optional[float] = ...) -> None: ...
+
+class Mission(_message.Message):
+    __slots__ = ("name", "robot", "frame", "bbox")
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    ROBOT_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    BBOX_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    robot: str
+    frame: str
+    bbox: Box3
+    def __init__(self, name: _Optional[str] = ..., robot: _Optional[str] = ..., frame: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ...) -> None: ...
+
+class VertexRef(_message.Message):
+    __slots__ = ("mission", "index")
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    INDEX_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    index: int
+    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ...) -> None: ...
+
+class Vertex(_message.Message):
+    __slots__ = ("mission", "index", "pose", "timestamp")
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    INDEX_FIELD_NUMBER: _ClassVar[int]
+    POSE_FIELD_NUMBER: _ClassVar[int]
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    index: int
+    pose: Pose3
+    timestamp: float
+    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., pose: _Optional[_Union[Pose3, _Mapping]] = ..., timestamp: _Optional[float] = ...) -> None: ...
+
+class Edge(_message.Message):
+    __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind")
+    class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+        __slots__ = ()
+        KIND_UNSPECIFIED: _ClassVar[Edge.Kind]
+        ODOMETRY: _ClassVar[Edge.Kind]
+        LOOP: _ClassVar[Edge.Kind]
+        INTER_ROBOT: _ClassVar[Edge.Kind]
+    KIND_UNSPECIFIED: Edge.Kind
+    ODOMETRY: Edge.Kind
+    LOOP: Edge.Kind
+    INTER_ROBOT: Edge.Kind
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    FROM_VERTEX_FIELD_NUMBER: _ClassVar[int]
+    TO_VERTEX_FIELD_NUMBER: _ClassVar[int]
+    RELATIVE_FIELD_NUMBER: _ClassVar[int]
+    INFORMATION_FIELD_NUMBER: _ClassVar[int]
+    KIND_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    from_vertex: VertexRef
+    to_vertex: VertexRef
+    relative: Pose3
+    information: _containers.RepeatedScalarFieldContainer[float]
+    kind: Edge.Kind
+    def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ...) -> None: ...
+
+class Landmark(_message.Message):
+    __slots__ = ("mission", "index", "position", "covariance")
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    INDEX_FIELD_NUMBER: _ClassVar[int]
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    COVARIANCE_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    index: int
+    position: Point3
+    covariance: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., position: _Optional[_Union[Point3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class PointCloudBlock(_message.Message):
+    __slots__ = ("mission", "points", "count", "bbox", "compressed")
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    POINTS_FIELD_NUMBER: _ClassVar[int]
+    COUNT_FIELD_NUMBER: _ClassVar[int]
+    BBOX_FIELD_NUMBER: _ClassVar[int]
+    COMPRESSED_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    points: bytes
+    count: int
+    bbox: Box3
+    compressed: bool
+    def __init__(self, mission: _Optional[str] = ..., points: _Optional[bytes] = ..., count: _Optional[int] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., compressed: _Optional[bool] = ...) -> None: ...

@@ -1,0 +1,191 @@
+"""g2o pose graphs: a streaming reader and a writer (pure; no network, no store).
+
+Reads `VERTEX_SE2`, `VERTEX_SE3:QUAT`, `EDGE_SE2` and `EDGE_SE3:QUAT` (the
+formats in `shared/datasets/README.md` §4). 2D graphs are lifted to 3D: yaw
+becomes a rotation about z and the 3x3 information lands on (x, y, rz) of the
+6x6 (`se3.lift_information`). An edge `i -> i+1` is odometry, any other a loop.
+Graphs that list edges only get their vertices by chaining the odometry.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import TextIO
+
+from mapapi.errors import UsageError
+from mapapi.maps.errors import MapImportError
+from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, chain_odometry
+from mapapi.maps.se3 import Pose, from_se2, is_planar, lift_information, project_information, yaw
+
+Progress = Callable[[int, int], None]  # (lines read, 0: total unknown while streaming)
+
+# tag -> number of values after the tag
+_ARITY = {"VERTEX_SE2": 4, "VERTEX_SE3:QUAT": 8, "EDGE_SE2": 11, "EDGE_SE3:QUAT": 30}
+_IGNORED = {"FIX"}  # gauge fixing: says nothing about the graph itself
+_PROGRESS_EVERY = 10_000
+
+
+def read_g2o(
+    path: str | Path, mission: str | None = None, robot: str = "", progress: Progress | None = None
+) -> MissionGraph:
+    """Read a g2o file as one mission (named after the file unless `mission`).
+
+    Raises:
+        MapImportError: a line is malformed (the message names it).
+    """
+    path = Path(path)
+    with path.open(encoding="utf-8") as lines:
+        return parse_g2o(lines, mission or path.stem, robot, source=str(path), progress=progress)
+
+
+def parse_g2o(
+    lines: Iterable[str],
+    mission: str,
+    robot: str = "",
+    *,
+    source: str = "",
+    progress: Progress | None = None,
+) -> MissionGraph:
+    """Parse g2o text line by line into a `MissionGraph`.
+
+    Args:
+        lines: the text, one record per line (an open file streams).
+        mission: the mission's name.
+        robot: the robot's name.
+        source: the file name errors mention.
+        progress: called every 10,000 lines with (lines read, 0).
+
+    Raises:
+        MapImportError: an unknown record, a wrong number of values, a value
+            that is not a finite number, a duplicate vertex, or 2D mixed with 3D.
+    """
+    graph = MissionGraph(mission, robot, frame=f"{mission}/map")
+    dims: set[int] = set()
+    number = 0
+    for number, line in enumerate(lines, 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#") or parts[0] in _IGNORED:
+            continue
+        tag = parts[0]
+        arity = _ARITY.get(tag)
+        if arity is None:
+            raise MapImportError(
+                f"unsupported record {tag!r}; expected one of {', '.join(_ARITY)}",
+                source=source,
+                line=number,
+            )
+        if len(parts) != arity + 1:
+            raise MapImportError(
+                f"{tag} needs {arity} values, found {len(parts) - 1}", source=source, line=number
+            )
+        try:
+            values = _numbers(parts)
+        except ValueError as exc:
+            raise MapImportError(f"{tag}: {exc}", source=source, line=number) from None
+        dims.add(2 if tag.endswith("SE2") else 3)
+        if len(dims) > 1:
+            raise MapImportError("2D and 3D records mixed in one graph", source=source, line=number)
+        if tag.startswith("VERTEX"):
+            _add_vertex(graph, tag, values, source, number)
+        else:
+            graph.edges.append(_edge(mission, tag, values, source, number))
+        if progress is not None and number % _PROGRESS_EVERY == 0:
+            progress(number, 0)
+    graph.planar = dims == {2}
+    ends = {e.source[1] for e in graph.edges} | {e.target[1] for e in graph.edges}
+    chain_odometry(graph, ends)
+    if progress is not None:
+        progress(number, number)
+    return graph
+
+
+def _numbers(parts: list[str]) -> list[float]:
+    values = [float(v) for v in parts[1:]]
+    if not math.isfinite(math.fsum(values)):
+        raise ValueError("values must be finite numbers")
+    return values
+
+
+def _index(value: float, source: str, line: int) -> int:
+    index = int(value)
+    if index != value or index < 0:
+        raise MapImportError(
+            f"vertex id {value!r} is not a natural number", source=source, line=line
+        )
+    return index
+
+
+def _quaternion(pose: Pose, source: str, line: int) -> Pose:
+    norm = math.sqrt(pose[3] ** 2 + pose[4] ** 2 + pose[5] ** 2 + pose[6] ** 2)
+    if abs(norm - 1.0) > 1e-3:
+        raise MapImportError(
+            f"quaternion norm {norm:.6g} is not 1 (order is qx qy qz qw)", source=source, line=line
+        )
+    return pose
+
+
+def _add_vertex(graph: MissionGraph, tag: str, v: list[float], source: str, line: int) -> None:
+    index = _index(v[0], source, line)
+    if index in graph.vertices:
+        raise MapImportError(f"vertex {index} is defined twice", source=source, line=line)
+    if tag == "VERTEX_SE2":
+        graph.vertices[index] = from_se2(v[1], v[2], v[3])
+    else:
+        graph.vertices[index] = _quaternion(
+            (v[1], v[2], v[3], v[4], v[5], v[6], v[7]), source, line
+        )
+
+
+def _edge(mission: str, tag: str, v: list[float], source: str, line: int) -> GraphEdge:
+    i, j = _index(v[0], source, line), _index(v[1], source, line)
+    if tag == "EDGE_SE2":
+        relative = from_se2(v[2], v[3], v[4])
+        information = lift_information(tuple(v[5:11]))
+    else:
+        relative = _quaternion((v[2], v[3], v[4], v[5], v[6], v[7], v[8]), source, line)
+        information = tuple(v[9:30])
+    kind = EdgeKind.ODOMETRY if j == i + 1 else EdgeKind.LOOP
+    return GraphEdge((mission, i), (mission, j), relative, information, kind)
+
+
+def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -> int:
+    """Write a mission as g2o text; returns how many edges were written.
+
+    Edges to other missions' vertices cannot be expressed in one g2o file and
+    are left out. Floats are written in their shortest exact form, so a 3D
+    export reads back to the same numbers.
+
+    Args:
+        planar: write VERTEX_SE2/EDGE_SE2; default: when the graph came from 2D.
+
+    Raises:
+        UsageError: `planar` was asked of a graph that leaves the plane.
+    """
+    if planar is None:
+        planar = graph.planar
+    if planar and not all(is_planar(p) for p in graph.vertices.values()):
+        raise UsageError(f"mission {graph.name!r} is not planar; export it as 3D")
+    for index, pose in sorted(graph.vertices.items()):
+        if planar:
+            out.write(f"VERTEX_SE2 {index} {pose[0]!r} {pose[1]!r} {yaw(pose)!r}\n")
+        else:
+            out.write(f"VERTEX_SE3:QUAT {index} {_join(pose)}\n")
+    written = 0
+    for edge in graph.edges:
+        if edge.source[0] != graph.name or edge.target[0] != graph.name:
+            continue
+        ends = f"{edge.source[1]} {edge.target[1]}"
+        rel = edge.relative
+        if planar:
+            info = _join(project_information(edge.information))
+            out.write(f"EDGE_SE2 {ends} {rel[0]!r} {rel[1]!r} {yaw(rel)!r} {info}\n")
+        else:
+            out.write(f"EDGE_SE3:QUAT {ends} {_join(rel)} {_join(edge.information)}\n")
+        written += 1
+    return written
+
+
+def _join(values: Iterable[float]) -> str:
+    return " ".join(repr(v) for v in values)

@@ -1,0 +1,112 @@
+"""The in-memory pose graph the parsers build and `import_graph` stores.
+
+A `MissionGraph` is one robot's session: its vertices (index -> pose) and the
+edges it owns. An edge's ends are `(mission, index)` pairs, so an inter-robot
+edge names a vertex of another mission.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from enum import Enum
+
+from mapapi.maps.errors import MapImportError
+from mapapi.maps.se3 import IDENTITY, Pose, compose
+from mapapi.spatial import BBox
+
+log = logging.getLogger(__name__)
+
+VertexKey = tuple[str, int]  # (mission, index)
+
+
+class EdgeKind(Enum):
+    """What an edge measures (values match `mapapi.v1.Edge.Kind`)."""
+
+    ODOMETRY = 1
+    LOOP = 2
+    INTER_ROBOT = 3
+
+
+@dataclass(frozen=True, slots=True)
+class GraphEdge:
+    """A relative pose measurement `source -> target`, in the source's frame.
+
+    Attributes:
+        information: the 21-value upper triangle of the 6x6 information matrix,
+            row-major over (x, y, z, rx, ry, rz).
+    """
+
+    source: VertexKey
+    target: VertexKey
+    relative: Pose
+    information: tuple[float, ...]
+    kind: EdgeKind
+
+
+@dataclass(slots=True)
+class MissionGraph:
+    """One mission's pose graph.
+
+    Attributes:
+        name: the mission's name, unique in a repository.
+        robot: the robot that recorded it.
+        frame: the frame its poses are in.
+        vertices: vertex index -> pose (initial estimate).
+        edges: the edges this mission owns (inter-robot ones included).
+        planar: True when it came from a 2D (SE2) source.
+    """
+
+    name: str
+    robot: str = ""
+    frame: str = ""
+    vertices: dict[int, Pose] = field(default_factory=dict)
+    edges: list[GraphEdge] = field(default_factory=list)
+    planar: bool = False
+
+    def bbox(self) -> BBox | None:
+        """The box around the vertex positions (None without vertices)."""
+        if not self.vertices:
+            return None
+        xs, ys, zs = zip(*((p[0], p[1], p[2]) for p in self.vertices.values()), strict=True)
+        return BBox(min(xs), min(ys), min(zs), max(xs), max(ys), max(zs))
+
+    def count(self, kind: EdgeKind) -> int:
+        """How many edges of `kind` this mission owns."""
+        return sum(1 for e in self.edges if e.kind is kind)
+
+    def elements(self) -> int:
+        """Vertices plus edges: the unit of the import speed target."""
+        return len(self.vertices) + len(self.edges)
+
+
+def chain_odometry(graph: MissionGraph, wanted: Iterable[int]) -> int:
+    """Give every index in `wanted` without a pose one, by chaining the
+    mission's odometry edges (i -> i+1) from the lowest index, which starts at
+    the identity. A vertex the chain cannot reach starts again at the identity
+    (logged). Returns how many vertices were added.
+
+    Raises:
+        MapImportError: two odometry edges lead to the same vertex.
+    """
+    odometry: dict[int, GraphEdge] = {}
+    for edge in graph.edges:
+        if edge.kind is EdgeKind.ODOMETRY and edge.target[0] == graph.name:
+            if edge.target[1] in odometry:
+                raise MapImportError(
+                    f"two odometry edges lead to vertex {edge.target[1]}", source=graph.name
+                )
+            odometry[edge.target[1]] = edge
+    added = 0
+    for index in sorted(set(wanted) - graph.vertices.keys()):
+        before = odometry.get(index)
+        start = None if before is None else graph.vertices.get(before.source[1])
+        if start is None or before is None:
+            if added:
+                log.warning("mission %s: vertex %d restarts at the identity", graph.name, index)
+            graph.vertices[index] = IDENTITY
+        else:
+            graph.vertices[index] = compose(start, before.relative)
+        added += 1
+    return added

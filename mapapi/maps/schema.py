@@ -1,0 +1,112 @@
+"""The map tables and the conversion between `MissionGraph` parts and their
+protobuf messages (`proto/mapapi/v1/maps.proto`).
+
+Importing this module registers the `mapapi.v1` map types in the default
+protobuf pool, so `TableDescriptor.named(..., "mapapi.v1.Vertex")` finds them.
+"""
+
+from __future__ import annotations
+
+from google.protobuf.message import Message
+
+from mapapi._pb.mapapi.v1 import maps_pb2
+from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph
+from mapapi.maps.se3 import Pose
+from mapapi.spatial import BBox
+
+MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS = (
+    "missions",
+    "vertices",
+    "edges",
+    "landmarks",
+    "pointclouds",
+)
+
+Mission = maps_pb2.Mission
+Vertex = maps_pb2.Vertex
+Edge = maps_pb2.Edge
+Landmark = maps_pb2.Landmark
+PointCloudBlock = maps_pb2.PointCloudBlock
+Box3 = maps_pb2.Box3
+Pose3 = maps_pb2.Pose3
+
+# table name -> payload class, for the tables a graph import writes
+GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
+MAP_TABLES: dict[str, type[Message]] = {
+    **GRAPH_TABLES,
+    LANDMARKS: Landmark,
+    CLOUDS: PointCloudBlock,
+}
+_KIND = {kind: Edge.Kind.Value(kind.name) for kind in EdgeKind}
+
+BBoxTuple = tuple[float, float, float, float, float, float]
+
+
+def box_to_pb(box: BBox) -> maps_pb2.Box3:
+    """A `BBox` as its message."""
+    return Box3(
+        xmin=box.xmin, ymin=box.ymin, zmin=box.zmin, xmax=box.xmax, ymax=box.ymax, zmax=box.zmax
+    )
+
+
+def box_from_pb(box: maps_pb2.Box3) -> BBox:
+    """A `Box3` message as a `BBox` (raises InvalidBBox when inverted)."""
+    return BBox(box.xmin, box.ymin, box.zmin, box.xmax, box.ymax, box.zmax)
+
+
+def pose_to_pb(p: Pose) -> maps_pb2.Pose3:
+    """A pose 7-tuple as its message."""
+    return Pose3(x=p[0], y=p[1], z=p[2], qx=p[3], qy=p[4], qz=p[5], qw=p[6])
+
+
+def pose_from_pb(p: maps_pb2.Pose3) -> Pose:
+    """A `Pose3` message as a 7-tuple."""
+    return (p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw)
+
+
+def mission_to_pb(graph: MissionGraph) -> maps_pb2.Mission:
+    """The mission row of a graph, with the box around its vertices."""
+    message = Mission(name=graph.name, robot=graph.robot, frame=graph.frame)
+    box = graph.bbox()
+    if box is not None:
+        message.bbox.CopyFrom(box_to_pb(box))
+    return message
+
+
+def vertex_to_pb(mission: str, index: int, pose: Pose) -> maps_pb2.Vertex:
+    """One vertex row."""
+    return Vertex(mission=mission, index=index, pose=pose_to_pb(pose))
+
+
+def edge_to_pb(mission: str, edge: GraphEdge) -> maps_pb2.Edge:
+    """One edge row, owned by `mission`."""
+    message = Edge(mission=mission, relative=pose_to_pb(edge.relative), kind=_KIND[edge.kind])
+    message.from_vertex.mission, message.from_vertex.index = edge.source
+    message.to_vertex.mission, message.to_vertex.index = edge.target
+    message.information.extend(edge.information)
+    return message
+
+
+def edge_from_pb(message: maps_pb2.Edge) -> GraphEdge:
+    """A stored edge row as a `GraphEdge`."""
+    return GraphEdge(
+        (message.from_vertex.mission, message.from_vertex.index),
+        (message.to_vertex.mission, message.to_vertex.index),
+        pose_from_pb(message.relative),
+        tuple(message.information),
+        EdgeKind(message.kind),
+    )
+
+
+def mission_bbox(message: maps_pb2.Mission) -> BBoxTuple | None:
+    """A mission row's box, for `TableDescriptor.bbox` (the spatial index)."""
+    if not message.HasField("bbox"):
+        return None
+    b = message.bbox
+    return (b.xmin, b.ymin, b.zmin, b.xmax, b.ymax, b.zmax)
+
+
+def vertex_bbox(message: maps_pb2.Vertex) -> BBoxTuple:
+    """A vertex row's position as a point box, for `TableDescriptor.bbox`."""
+    p = message.pose
+    return (p.x, p.y, p.z, p.x, p.y, p.z)

@@ -1,0 +1,87 @@
+"""Pure SE(3) helpers for the importers: poses as 7-tuples, information matrices
+as upper triangles. No numpy: the parsers stay light and exact."""
+
+from __future__ import annotations
+
+import math
+
+# (x, y, z, qx, qy, qz, qw): translation in metres, unit quaternion, w last (g2o order).
+Pose = tuple[float, float, float, float, float, float, float]
+
+IDENTITY: Pose = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+
+# Rows/columns of the 6x6 information (x, y, z, rx, ry, rz) that an SE(2)
+# measurement (x, y, theta) occupies: theta is a rotation about z.
+_SE2_AXES = (0, 1, 5)
+
+
+def upper_index(row: int, col: int, size: int = 6) -> int:
+    """Position of (row, col), row <= col, in a row-major upper triangle."""
+    return row * size - row * (row - 1) // 2 + (col - row)
+
+
+def lift_information(upper3: tuple[float, ...]) -> tuple[float, ...]:
+    """The 21-value 6x6 upper triangle of a 3x3 SE(2) information (6 values).
+
+    The entries land on (x, y, rz); z, rx and ry get zero information: a planar
+    graph says nothing about them.
+    """
+    out = [0.0] * 21
+    k = 0
+    for i in range(3):
+        for j in range(i, 3):
+            out[upper_index(_SE2_AXES[i], _SE2_AXES[j])] = upper3[k]
+            k += 1
+    return tuple(out)
+
+
+def project_information(upper6: tuple[float, ...]) -> tuple[float, ...]:
+    """Inverse of `lift_information`: the 3x3 (x, y, theta) block, 6 values."""
+    return tuple(
+        upper6[upper_index(_SE2_AXES[i], _SE2_AXES[j])] for i in range(3) for j in range(i, 3)
+    )
+
+
+def isotropic_information(tau: float, kappa: float) -> tuple[float, ...]:
+    """The 6x6 information of an SE-Sync/DPGO measurement with translation
+    precision `tau` and rotation precision `kappa`: diag(tau I3, 2 kappa I3)
+    (SE-Sync reads g2o as tau = 3/tr(Σt), kappa = 3/(2 tr(ΣR)))."""
+    out = [0.0] * 21
+    for axis in range(6):
+        out[upper_index(axis, axis)] = tau if axis < 3 else 2.0 * kappa
+    return tuple(out)
+
+
+def from_se2(x: float, y: float, theta: float) -> Pose:
+    """A planar pose lifted to SE(3): yaw becomes a rotation about z."""
+    half = 0.5 * theta
+    return (x, y, 0.0, 0.0, 0.0, math.sin(half), math.cos(half))
+
+
+def yaw(pose: Pose) -> float:
+    """The rotation about z of a planar pose (inverse of `from_se2`)."""
+    return 2.0 * math.atan2(pose[5], pose[6])
+
+
+def is_planar(pose: Pose, tol: float = 1e-12) -> bool:
+    """True when the pose lies in z = 0 and rotates about z only."""
+    return abs(pose[2]) <= tol and abs(pose[3]) <= tol and abs(pose[4]) <= tol
+
+
+def compose(a: Pose, b: Pose) -> Pose:
+    """a ∘ b: b expressed in a's frame, then mapped to a's parent frame."""
+    ax, ay, az, qx, qy, qz, qw = a
+    bx, by, bz, rx, ry, rz, rw = b
+    # t = a.t + R(a.q) b.t, via t' = v + 2 q_v x (q_v x v + w v)
+    cx = qy * bz - qz * by + qw * bx
+    cy = qz * bx - qx * bz + qw * by
+    cz = qx * by - qy * bx + qw * bz
+    tx = ax + bx + 2.0 * (qy * cz - qz * cy)
+    ty = ay + by + 2.0 * (qz * cx - qx * cz)
+    tz = az + bz + 2.0 * (qx * cy - qy * cx)
+    ox = qw * rx + qx * rw + qy * rz - qz * ry
+    oy = qw * ry - qx * rz + qy * rw + qz * rx
+    oz = qw * rz + qx * ry - qy * rx + qz * rw
+    ow = qw * rw - qx * rx - qy * ry - qz * rz
+    norm = math.sqrt(ox * ox + oy * oy + oz * oz + ow * ow)
+    return (tx, ty, tz, ox / norm, oy / norm, oz / norm, ow / norm)
