@@ -174,6 +174,112 @@ class ControlResult:
     json: str
 
 
+# -- the Chord ring (DESIGN §7); ring keys travel as 20 big-endian bytes -------------
+
+
+@dataclass(frozen=True, slots=True)
+class ChordPeer:
+    """A node of the ring: its key (20 bytes) and its Rpc address."""
+
+    key: bytes
+    address: str
+
+
+@dataclass(frozen=True, slots=True)
+class ChordFindSuccessor:
+    """One step of an iterative lookup of `key`, ignoring the nodes in `avoid`."""
+
+    key: bytes
+    avoid: tuple[bytes, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ChordHop:
+    """`node` is the successor of the key (`final`) or the next node to ask."""
+
+    node: ChordPeer
+    final: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ChordGetNeighbours:
+    """Ask a node for its predecessor and successor list (also a liveness probe)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ChordNeighbours:
+    """A node's predecessor (zero or one) and successor list."""
+
+    predecessor: tuple[ChordPeer, ...]
+    successors: tuple[ChordPeer, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ChordNotify:
+    """`node` thinks it might be the receiver's predecessor (Chord Fig. 7)."""
+
+    node: ChordPeer
+
+
+@dataclass(frozen=True, slots=True)
+class ChordLeave:
+    """`node` leaves gracefully; its predecessor (zero or one) and successors."""
+
+    node: ChordPeer
+    predecessor: tuple[ChordPeer, ...]
+    successors: tuple[ChordPeer, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ChordAdd:
+    """Add `member` to the set under `key` for `ttl` seconds (atomic at the owner)."""
+
+    key: bytes
+    member: bytes
+    ttl: float
+    replica: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ChordRemove:
+    """Remove `member` from the set under `key`."""
+
+    key: bytes
+    member: bytes
+    replica: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ChordGet:
+    """The live members under `key`."""
+
+    key: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class ChordValues:
+    """The answer to `ChordGet`."""
+
+    members: tuple[bytes, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ChordEntry:
+    """One stored member and the seconds it has left."""
+
+    key: bytes
+    member: bytes
+    ttl: float
+
+
+@dataclass(frozen=True, slots=True)
+class ChordStore:
+    """Entries to store; with `replicate` the receiver owns them and copies them on."""
+
+    entries: tuple[ChordEntry, ...]
+    replicate: bool = False
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -187,6 +293,17 @@ SWARM_BODIES: dict[str, type] = {
     "holder_change": HolderChange,
     "holders_query": HoldersQuery,
     "holders": Holders,
+    "chord_find_successor": ChordFindSuccessor,
+    "chord_hop": ChordHop,
+    "chord_get_neighbours": ChordGetNeighbours,
+    "chord_neighbours": ChordNeighbours,
+    "chord_notify": ChordNotify,
+    "chord_leave": ChordLeave,
+    "chord_add": ChordAdd,
+    "chord_remove": ChordRemove,
+    "chord_get": ChordGet,
+    "chord_values": ChordValues,
+    "chord_store": ChordStore,
     "hello": Hello,
     "welcome": Welcome,
     "bye": Bye,

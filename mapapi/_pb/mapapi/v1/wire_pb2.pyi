@@ -9,7 +9,7 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Envelope(_message.Message):
-    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "hello", "welcome", "bye", "control_call", "control_result")
+    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "hello", "welcome", "bye", "control_call", "control_result")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Envelope.Kind]
@@ -39,6 +39,17 @@ class Envelope(_message.Message):
     HOLDER_CHANGE_FIELD_NUMBER: _ClassVar[int]
     HOLDERS_QUERY_FIELD_NUMBER: _ClassVar[int]
     HOLDERS_FIELD_NUMBER: _ClassVar[int]
+    CHORD_FIND_SUCCESSOR_FIELD_NUMBER: _ClassVar[int]
+    CHORD_HOP_FIELD_NUMBER: _ClassVar[int]
+    CHORD_GET_NEIGHBOURS_FIELD_NUMBER: _ClassVar[int]
+    CHORD_NEIGHBOURS_FIELD_NUMBER: _ClassVar[int]
+    CHORD_NOTIFY_FIELD_NUMBER: _ClassVar[int]
+    CHORD_LEAVE_FIELD_NUMBER: _ClassVar[int]
+    CHORD_ADD_FIELD_NUMBER: _ClassVar[int]
+    CHORD_REMOVE_FIELD_NUMBER: _ClassVar[int]
+    CHORD_GET_FIELD_NUMBER: _ClassVar[int]
+    CHORD_VALUES_FIELD_NUMBER: _ClassVar[int]
+    CHORD_STORE_FIELD_NUMBER: _ClassVar[int]
     HELLO_FIELD_NUMBER: _ClassVar[int]
     WELCOME_FIELD_NUMBER: _ClassVar[int]
     BYE_FIELD_NUMBER: _ClassVar[int]
@@ -63,12 +74,23 @@ class Envelope(_message.Message):
     holder_change: HolderChange
     holders_query: HoldersQuery
     holders: Holders
+    chord_find_successor: ChordFindSuccessor
+    chord_hop: ChordHop
+    chord_get_neighbours: ChordGetNeighbours
+    chord_neighbours: ChordNeighbours
+    chord_notify: ChordNotify
+    chord_leave: ChordLeave
+    chord_add: ChordAdd
+    chord_remove: ChordRemove
+    chord_get: ChordGet
+    chord_values: ChordValues
+    chord_store: ChordStore
     hello: Hello
     welcome: Welcome
     bye: Bye
     control_call: ControlCall
     control_result: ControlResult
-    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ...) -> None: ...
+    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ...) -> None: ...
 
 class ErrorReply(_message.Message):
     __slots__ = ("code", "message")
@@ -215,6 +237,110 @@ class Holders(_message.Message):
     table: str
     holders: _containers.RepeatedCompositeFieldContainer[Member]
     def __init__(self, chunk: _Optional[bytes] = ..., table: _Optional[str] = ..., holders: _Optional[_Iterable[_Union[Member, _Mapping]]] = ...) -> None: ...
+
+class ChordPeer(_message.Message):
+    __slots__ = ("key", "address")
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    ADDRESS_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    address: str
+    def __init__(self, key: _Optional[bytes] = ..., address: _Optional[str] = ...) -> None: ...
+
+class ChordFindSuccessor(_message.Message):
+    __slots__ = ("key", "avoid")
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    AVOID_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    avoid: _containers.RepeatedScalarFieldContainer[bytes]
+    def __init__(self, key: _Optional[bytes] = ..., avoid: _Optional[_Iterable[bytes]] = ...) -> None: ...
+
+class ChordHop(_message.Message):
+    __slots__ = ("node", "final")
+    NODE_FIELD_NUMBER: _ClassVar[int]
+    FINAL_FIELD_NUMBER: _ClassVar[int]
+    node: ChordPeer
+    final: bool
+    def __init__(self, node: _Optional[_Union[ChordPeer, _Mapping]] = ..., final: _Optional[bool] = ...) -> None: ...
+
+class ChordGetNeighbours(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class ChordNeighbours(_message.Message):
+    __slots__ = ("predecessor", "successors")
+    PREDECESSOR_FIELD_NUMBER: _ClassVar[int]
+    SUCCESSORS_FIELD_NUMBER: _ClassVar[int]
+    predecessor: _containers.RepeatedCompositeFieldContainer[ChordPeer]
+    successors: _containers.RepeatedCompositeFieldContainer[ChordPeer]
+    def __init__(self, predecessor: _Optional[_Iterable[_Union[ChordPeer, _Mapping]]] = ..., successors: _Optional[_Iterable[_Union[ChordPeer, _Mapping]]] = ...) -> None: ...
+
+class ChordNotify(_message.Message):
+    __slots__ = ("node",)
+    NODE_FIELD_NUMBER: _ClassVar[int]
+    node: ChordPeer
+    def __init__(self, node: _Optional[_Union[ChordPeer, _Mapping]] = ...) -> None: ...
+
+class ChordLeave(_message.Message):
+    __slots__ = ("node", "predecessor", "successors")
+    NODE_FIELD_NUMBER: _ClassVar[int]
+    PREDECESSOR_FIELD_NUMBER: _ClassVar[int]
+    SUCCESSORS_FIELD_NUMBER: _ClassVar[int]
+    node: ChordPeer
+    predecessor: _containers.RepeatedCompositeFieldContainer[ChordPeer]
+    successors: _containers.RepeatedCompositeFieldContainer[ChordPeer]
+    def __init__(self, node: _Optional[_Union[ChordPeer, _Mapping]] = ..., predecessor: _Optional[_Iterable[_Union[ChordPeer, _Mapping]]] = ..., successors: _Optional[_Iterable[_Union[ChordPeer, _Mapping]]] = ...) -> None: ...
+
+class ChordAdd(_message.Message):
+    __slots__ = ("key", "member", "ttl", "replica")
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    MEMBER_FIELD_NUMBER: _ClassVar[int]
+    TTL_FIELD_NUMBER: _ClassVar[int]
+    REPLICA_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    member: bytes
+    ttl: float
+    replica: bool
+    def __init__(self, key: _Optional[bytes] = ..., member: _Optional[bytes] = ..., ttl: _Optional[float] = ..., replica: _Optional[bool] = ...) -> None: ...
+
+class ChordRemove(_message.Message):
+    __slots__ = ("key", "member", "replica")
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    MEMBER_FIELD_NUMBER: _ClassVar[int]
+    REPLICA_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    member: bytes
+    replica: bool
+    def __init__(self, key: _Optional[bytes] = ..., member: _Optional[bytes] = ..., replica: _Optional[bool] = ...) -> None: ...
+
+class ChordGet(_message.Message):
+    __slots__ = ("key",)
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    def __init__(self, key: _Optional[bytes] = ...) -> None: ...
+
+class ChordValues(_message.Message):
+    __slots__ = ("members",)
+    MEMBERS_FIELD_NUMBER: _ClassVar[int]
+    members: _containers.RepeatedScalarFieldContainer[bytes]
+    def __init__(self, members: _Optional[_Iterable[bytes]] = ...) -> None: ...
+
+class ChordEntry(_message.Message):
+    __slots__ = ("key", "member", "ttl")
+    KEY_FIELD_NUMBER: _ClassVar[int]
+    MEMBER_FIELD_NUMBER: _ClassVar[int]
+    TTL_FIELD_NUMBER: _ClassVar[int]
+    key: bytes
+    member: bytes
+    ttl: float
+    def __init__(self, key: _Optional[bytes] = ..., member: _Optional[bytes] = ..., ttl: _Optional[float] = ...) -> None: ...
+
+class ChordStore(_message.Message):
+    __slots__ = ("entries", "replicate")
+    ENTRIES_FIELD_NUMBER: _ClassVar[int]
+    REPLICATE_FIELD_NUMBER: _ClassVar[int]
+    entries: _containers.RepeatedCompositeFieldContainer[ChordEntry]
+    replicate: bool
+    def __init__(self, entries: _Optional[_Iterable[_Union[ChordEntry, _Mapping]]] = ..., replicate: _Optional[bool] = ...) -> None: ...
 
 class Hello(_message.Message):
     __slots__ = ("member",)
