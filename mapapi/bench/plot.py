@@ -114,25 +114,37 @@ def plot_viewtest(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
         )
     _hline(ax, REDIS_4_CLIENTS, "central Redis WATCH/MULTI, 4 clients", color="grey", ls="--")
     _hline(ax, TARGET_P4, "target at P = 4", color="tab:red", ls=":")
-    ax.set_xlabel("peer processes P (each commits N increments of one counter)")
-    ax.set_ylabel("commits / s")
-    ax.set_xticks(sorted({int(r["peers"]) for r in rows}))
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
-    aborts = ax.twinx()
-    _series(
-        aborts,
-        _by(rows, "peers", "aborts_per_commit"),
-        "aborts per commit (right axis)",
-        ls="--",
-        marker="s",
-        color="tab:orange",
+    _frame(
+        ax,
+        "peer processes P (each commits N increments of one counter)",
+        "commits / s",
+        rows,
+        "peers",
     )
-    aborts.set_ylabel("aborts per commit")
-    aborts.set_ylim(bottom=0)
+    aborts = _right_axis(
+        ax, _by(rows, "peers", "aborts_per_commit"), "aborts per commit", "tab:orange"
+    )
     ax.set_title("Algorithm 1 (mapctl bench viewtest): throughput against peers", fontsize=10)
     _finish(fig, ax, aborts, rows, output, legend="upper center")
     plt.close(fig)
+
+
+def _frame(ax: Any, xlabel: str, ylabel: str, rows: Sequence[dict[str, Any]], x: str) -> None:
+    """Label the left axis, tick every measured x, start y at 0, draw a light grid."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_xticks(sorted({int(r[x]) for r in rows}))
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+
+
+def _right_axis(ax: Any, points: Any, label: str, color: str) -> Any:
+    """A second series on a right-hand axis of its own (dashed, square markers)."""
+    right = ax.twinx()
+    _series(right, points, f"{label} (right axis)", ls="--", marker="s", color=color)
+    right.set_ylabel(label)
+    right.set_ylim(bottom=0)
+    return right
 
 
 def plot_commit(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
@@ -156,22 +168,16 @@ def plot_commit(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
             alpha=0.6,
         )
     _hline(ax, TARGET_K3_P50_MS, "target: p50 at K = 3", color="tab:red", ls=":")
-    ax.set_xlabel("holders K (peer processes replicating the chunk, the writer included)")
-    ax.set_ylabel("commit latency, ms")
-    ax.set_xticks(sorted({int(r["holders"]) for r in rows}))
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
-    messages = ax.twinx()
-    _series(
-        messages,
-        _by(rows, "holders", "messages_per_commit"),
-        "messages per commit (right axis)",
-        ls="--",
-        marker="s",
-        color="grey",
+    _frame(
+        ax,
+        "holders K (peer processes replicating the chunk, the writer included)",
+        "commit latency, ms",
+        rows,
+        "holders",
     )
-    messages.set_ylabel("messages per commit, all peers")
-    messages.set_ylim(bottom=0)
+    messages = _right_axis(
+        ax, _by(rows, "holders", "messages_per_commit"), "messages per commit, all peers", "grey"
+    )
     ax.set_title("Uncontended commit (mapctl bench commit): latency against holders", fontsize=10)
     _finish(fig, ax, messages, rows, output)
     plt.close(fig)
