@@ -218,7 +218,7 @@ class TestReadersWait:
                 assert first is not None
                 assert second is not None
                 seen.append((first.value, second.value))
-                await asyncio.sleep(0)  # a readable chunk never suspends the read: yield
+                await asyncio.sleep(0)  # sync-ok: a yield (0 s), so the writer task runs
 
         async with asyncio.timeout(20):
             await asyncio.gather(write(), read(r), read(s))
