@@ -13,13 +13,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from mapapi.clock import LamportClock
 from mapapi.errors import ConflictError, LockNotHeld, LockTimeout
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId
-from mapapi.lock_client import Held, LockService
-from mapapi.replication import Replicator
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.transaction import (
     Change,
@@ -29,6 +28,10 @@ from mapapi.transaction import (
     build_revisions,
     validate,
 )
+
+if TYPE_CHECKING:  # the network stack loads only for a peer on the network
+    from mapapi.lock_client import LockService
+    from mapapi.replication import Replicator
 
 Applied = Callable[[CommitRecord, list[Revision]], None]
 
@@ -170,6 +173,8 @@ async def commit_distributed(
             a lease ran out before the commit was staged everywhere (the
             holders' fencing refused it); nothing was applied anywhere (retriable).
     """
+    from mapapi.lock_client import Held
+
     held: list[Held] = []
     decision = _Decision(None, [])
     pushed = False
