@@ -9,9 +9,10 @@ the same class, so a command exits with the same status whether a daemon runs
 or not (a conflicting `commit` still exits 3). `RemoteOperations` is the
 client: the same `async call(op, args)` as `Operations`.
 
-Peers also answer a few read-only operations over the swarm port
-(`PEER_QUERIES`: the chunks a peer holds), which `mapctl clone --chunks all`
-uses to find every chunk of the swarm (DESIGN §7, "by peer").
+`ask_chunk_list` asks a peer over its swarm port which chunks it holds
+(`ChunkListQuery`, DESIGN §7 "by peer"): `mapctl chunk list --peer ADDR`, and
+`mapctl clone --chunks all` through `ask_chunk_lists` to find every chunk of
+the swarm.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from mapapi.clock import LamportClock
 from mapapi.errors import MapError, NetworkError, PeerNotRunning, PeerUnavailable, UsageError
 from mapapi.ids import PeerId
 from mapapi.net.codec import Ping, Pong
-from mapapi.net.messages import ControlCall, ControlResult
+from mapapi.net.messages import ChunkList, ChunkListQuery, ChunkSummary, ControlCall, ControlResult
 from mapapi.net.rpc import Request, Rpc
 from mapapi.net.transport import ZmqTransport
 
@@ -49,11 +50,9 @@ PING_TIMEOUT = 5.0
 CALL_TIMEOUT = 600.0
 """Seconds one operation may take (participating in a large chunk takes a while)."""
 QUERY_TIMEOUT = 5.0
-"""Seconds a peer waits for another peer's answer to a `PEER_QUERIES` operation."""
+"""Seconds to wait for another peer's list of chunks."""
 MAX_MESSAGE_SIZE = 512 * 1024 * 1024
 """Replies as large as a big `ls --json` must fit through the local endpoint."""
-PEER_QUERIES = frozenset({"chunk_list"})
-"""The operations other peers may ask for over the swarm port (read-only)."""
 
 
 def endpoints(repo: Repository) -> list[str]:
@@ -205,20 +204,34 @@ def _decode_args(text: str) -> dict[str, Json]:
     return args
 
 
-# -- read-only questions between peers -----------------------------------------------
-def serve_peer_queries(rpc: Rpc, ops: Operations) -> None:
-    """Answer `ControlCall`s for `PEER_QUERIES` from other peers on the swarm's `rpc`."""
+# -- lookup by peer ------------------------------------------------------------------
+async def ask_chunk_list(
+    address: str, table: str | None = None, *, rpc: Rpc | None = None
+) -> list[ChunkSummary]:
+    """The chunks the peer at `address` holds (of `table`, or all), asked over
+    its swarm port on `rpc`, or on a connection of its own without one.
 
-    async def rpc_peer_query(req: Request) -> ControlResult:
-        body: ControlCall = req.body
-        if body.op not in PEER_QUERIES:
-            raise UsageError(f"operation {body.op!r} is not served to other peers")
-        return ControlResult(json.dumps(await ops.call(body.op, _decode_args(body.args_json))))
+    Raises:
+        NetworkError: the peer did not answer within `QUERY_TIMEOUT` seconds.
+        UsageError: it has no such table.
+    """
+    query = ChunkListQuery(table or "")
+    if rpc is not None:
+        answer = await rpc.request(address, query, timeout=QUERY_TIMEOUT, expect=ChunkList)
+        return list(answer.chunks)
+    import zmq.asyncio
 
-    rpc.register(ControlCall, rpc_peer_query)
+    context = zmq.asyncio.Context()
+    own = Rpc(ZmqTransport(PeerId.new(), context=context))  # a DEALER only: nothing to bind
+    try:
+        answer = await own.request(address, query, timeout=QUERY_TIMEOUT, expect=ChunkList)
+        return list(answer.chunks)
+    finally:
+        await own.close()
+        context.destroy(linger=0)
 
 
-async def ask_chunk_lists(peer: Peer) -> dict[PeerId, list[dict[str, Json]]]:
+async def ask_chunk_lists(peer: Peer) -> dict[PeerId, list[ChunkSummary]]:
     """The chunks every other member holds, by member; members that do not
     answer are left out (and logged).
 
@@ -227,21 +240,17 @@ async def ask_chunk_lists(peer: Peer) -> dict[PeerId, list[dict[str, Json]]]:
     """
     if peer.swarm is None:
         raise PeerNotRunning("no peer runs on this repository; start it with `mapctl peer start`")
+    rpc = peer.swarm.rpc
     members = [s.member for s in peer.members()]
-    call = ControlCall("chunk_list", "{}")
     answers = await asyncio.gather(
-        *(
-            peer.swarm.rpc.request(m.address, call, timeout=QUERY_TIMEOUT, expect=ControlResult)
-            for m in members
-        ),
-        return_exceptions=True,
+        *(ask_chunk_list(m.address, rpc=rpc) for m in members), return_exceptions=True
     )
-    found: dict[PeerId, list[dict[str, Json]]] = {}
+    found: dict[PeerId, list[ChunkSummary]] = {}
     for member, answer in zip(members, answers, strict=True):
         if isinstance(answer, MapError):
             log.warning("peer %s did not list its chunks: %s", member.id.short, answer)
         elif isinstance(answer, BaseException):
             raise answer
         else:
-            found[member.id] = json.loads(answer.json)["chunks"]
+            found[member.id] = answer
     return found

@@ -159,8 +159,6 @@ async def _go_live(
     lease: float,
 ) -> PeerRecord:
     """Start the peer, join, serve the control endpoint, write the pid file."""
-    from mapapi.control import serve_peer_queries
-
     peer = control.ops.peer
     bound = await peer.start(listen, lease=lease)
     assert peer.swarm is not None
@@ -169,7 +167,6 @@ async def _go_live(
         peer.swarm.advertise(address)
     await _join_all(peer, join)
     endpoint = await control.start(repo)
-    serve_peer_queries(peer.swarm.rpc, control.ops)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
     repo.write_peer_record(record)
     log.info("peer %s serves %s (control %s)", peer.id.short, address, endpoint)

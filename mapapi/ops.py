@@ -146,13 +146,16 @@ class Operations:
         """Create a chunk."""
         return {"id": await self.peer.create_chunk(table), "table": table}
 
-    async def chunk_list(self, table: str | None = None) -> Json:
-        """Chunks held here."""
-        return {
-            "chunks": [
+    async def chunk_list(self, table: str | None = None, peer: str | None = None) -> Json:
+        """Chunks held here, or by the peer at address `peer` (asked over the network)."""
+        if peer is not None:
+            chunks = await self.peer.peer_chunks(check_address(peer), table)
+            rows = [{"id": c.chunk, "table": c.table, "items": c.items} for c in chunks]
+        else:
+            rows = [
                 {"id": c.id, "table": c.table, "items": c.items} for c in self.peer.chunks(table)
             ]
-        }
+        return {"chunks": rows}
 
     # -- views ---------------------------------------------------------------------------
     async def view_open(self, view: str, at: int | None = None, serializable: bool = False) -> Json:
@@ -439,9 +442,7 @@ class Operations:
         }
         for member, chunks in (await ask_chunk_lists(peer)).items():
             for c in chunks:
-                entry = found.setdefault(
-                    c["id"], {"id": c["id"], "table": c["table"], "holders": []}
-                )
+                entry = found.setdefault(c.chunk, {"id": c.chunk, "table": c.table, "holders": []})
                 entry["holders"].append(member)
         return {"chunks": [found[k] for k in sorted(found)]}
 

@@ -29,10 +29,10 @@ if TYPE_CHECKING:
 
     from mapapi.membership import MemberState
     from mapapi.merge import MergePolicy
-    from mapapi.net.messages import Member
+    from mapapi.net.messages import ChunkSummary, Member
     from mapapi.net.shaping import Shaper
     from mapapi.replication import Progress
-    from mapapi.swarm import Swarm
+    from mapapi.swarm import ChordOptions, Swarm
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +82,12 @@ class Peer:
 
     # -- the swarm -----------------------------------------------------------------
     async def start(
-        self, listen: str = "tcp://127.0.0.1:0", *, lease: float = 5.0, shaper: Shaper | None = None
+        self,
+        listen: str = "tcp://127.0.0.1:0",
+        *,
+        lease: float = 5.0,
+        shaper: Shaper | None = None,
+        chord: ChordOptions | None = None,
     ) -> str:
         """Put this peer on the network; returns the address others join through.
 
@@ -90,12 +95,17 @@ class Peer:
             listen: a zmq endpoint; port 0 picks a free port.
             lease: seconds a write lock lasts unless renewed.
             shaper: simulated latency and bandwidth per link, for experiments.
+            chord: periods and timeouts of the lookup ring and the time-to-live
+                of holder registrations (`mapapi.swarm.ChordOptions`; the
+                defaults suit robots on a wireless network).
         """
         from mapapi.swarm import Swarm  # the network stack loads only when needed
 
         if self.swarm is not None:
             raise UsageError(f"peer already listens on {self.swarm.address}")
-        swarm = Swarm(self.id, self.name, self.store, self.clock, lease=lease, shaper=shaper)
+        swarm = Swarm(
+            self.id, self.name, self.store, self.clock, lease=lease, shaper=shaper, chord=chord
+        )
         address = await swarm.start(listen)
         self.swarm = swarm
         return address
@@ -151,6 +161,17 @@ class Peer:
         self.store.chunk_table(chunk_id)
         return self.store.holders(chunk_id) or [self.id]
 
+    async def peer_chunks(self, address: str, table: str | None = None) -> list[ChunkSummary]:
+        """The chunks the peer at `address` holds (lookup by peer, DESIGN §7).
+
+        Raises:
+            NetworkError: it did not answer in time.
+        """
+        from mapapi.control import ask_chunk_list
+
+        rpc = self.swarm.rpc if self.swarm is not None else None
+        return await ask_chunk_list(address, table, rpc=rpc)
+
     async def __aenter__(self) -> Peer:
         return self
 
@@ -185,11 +206,14 @@ class Peer:
         return descriptor
 
     async def create_chunk(self, table: str) -> ChunkId:
-        """A new, empty chunk of `table`, held by this peer."""
+        """A new, empty chunk of `table`, held by this peer (and, on the network,
+        announced in the lookup index)."""
         self.table(table)
         chunk_id = ChunkId.new()
         self.store.add_chunk(chunk_id, table)
         self.store.set_holders(chunk_id, [self.id])
+        if self.swarm is not None:
+            await self.swarm.replicator.register(chunk_id)
         return chunk_id
 
     def chunks(self, table: str | None = None) -> list[ChunkInfo]:

@@ -3,8 +3,11 @@
 `Replicator` serves the holder's side of the commit protocol (stage a batch
 under a current lease, apply it atomically with the unlock), hands a chunk's
 full state with history to a newcomer under the chunk's write lock, and tells
-the other holders about joins and leaves. It finds holders by asking the
-known members until the lookup index exists.
+the other holders about joins and leaves. It registers this peer as a holder
+of each chunk it holds in the Chord index (DESIGN §7, lookup by reference),
+refreshing the registrations before their time-to-live runs out, and finds a
+chunk's holders there first, falling back to asking every known member. It
+also answers `ChunkListQuery` (lookup by peer).
 """
 
 from __future__ import annotations
@@ -12,7 +15,9 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
+from mapapi.dht.ring import chunk_key
 from mapapi.errors import (
     ChunkNotFound,
     LockNotHeld,
@@ -27,7 +32,10 @@ from mapapi.lock_client import Held, LockService
 from mapapi.membership import Members
 from mapapi.net.messages import (
     Ack,
+    ChunkList,
+    ChunkListQuery,
     ChunkPart,
+    ChunkSummary,
     CommitAbort,
     CommitApply,
     CommitBatch,
@@ -41,10 +49,31 @@ from mapapi.net.messages import (
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 
+if TYPE_CHECKING:
+    from mapapi.dht.chord import ChordNode
+
 log = logging.getLogger(__name__)
 
 PART_REVISIONS = 5_000  # revisions per ChunkPart message
 Progress = Callable[[int, int], None]  # (parts received, parts in all)
+HOLDER_TTL = 30.0
+"""Seconds a holder registration in the Chord index lives unless its owner refreshes it."""
+
+
+def encode_holder(member: Member) -> bytes:
+    """A holder as the Chord index stores it: 16 id bytes, then the UTF-8 address."""
+    return member.id.to_bytes() + member.address.encode()
+
+
+def decode_holder(raw: bytes) -> Member:
+    """The holder `encode_holder` wrote.
+
+    Raises:
+        ValueError: too short for an id, or an address that is not UTF-8.
+    """
+    if len(raw) <= 16:
+        raise ValueError(f"a holder entry is an id and an address, got {len(raw)} bytes")
+    return Member(PeerId.from_bytes(raw[:16]), raw[16:].decode())
 
 
 class Replicator:
@@ -57,7 +86,11 @@ class Replicator:
         locks: LockService,
         store: ReplicaStore,
         on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
+        *,
+        holder_ttl: float = HOLDER_TTL,
     ) -> None:
+        if not holder_ttl > 0:
+            raise ValueError(f"a time-to-live is a positive number of seconds, got {holder_ttl!r}")
         self.rpc = rpc
         self.members = members
         self.locks = locks
@@ -67,6 +100,11 @@ class Replicator:
         self._incoming: dict[ChunkId, list[ChunkPart]] = {}
         self._wanted: dict[ChunkId, int] = {}  # chunks asked for -> participations waiting
         self.progress: dict[ChunkId, Progress] = {}
+        self.chord: ChordNode | None = None  # the lookup index, once `index_on` ran
+        self.holder_ttl = holder_ttl
+        self._registered: set[ChunkId] = set()  # chunks this peer announces as their holder
+        self._indexing = asyncio.Lock()  # one index update at a time: no add after its remove
+        self._refresher: asyncio.Task[None] | None = None
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
             (CommitApply, self.rpc_commit_apply),
@@ -75,6 +113,7 @@ class Replicator:
             (ChunkPart, self.rpc_chunk_part),
             (HolderChange, self.rpc_holder_change),
             (HoldersQuery, self.rpc_holders_query),
+            (ChunkListQuery, self.rpc_chunk_list_query),
         ):
             rpc.register(body, handler)
 
@@ -305,21 +344,35 @@ class Replicator:
         holders = self.store.holders(chunk)
         if (not again and self.me in holders) or holders == [self.me]:
             return self.store.chunk_table(chunk)
-        found = await self.find_holders(chunk=chunk)
         if progress is not None:
             self.progress[chunk] = progress
         self._wanted[chunk] = self._wanted.get(chunk, 0) + 1
         try:
             last: MapError | None = None
-            for member in found.holders:
-                try:
-                    await self.rpc.request(
-                        member.address, ParticipateRequest(chunk), timeout=60.0, expect=Ack
-                    )
-                    return found.table
-                except MapError as exc:
-                    last = exc
-                    log.warning("participating in %s via %s failed: %s", chunk, member.id, exc)
+            indexed = await self._find_in_index(chunk)
+            tried: set[PeerId] = set()
+            for lookup in (indexed, None):  # the index's holders, then the members' answer
+                if lookup is None:
+                    try:
+                        lookup = await self._find_by_asking(HoldersQuery(chunk, None))
+                    except MapError:
+                        if last is None:
+                            raise
+                        break
+                for member in lookup.holders:
+                    if member.id in tried or member.id == self.me:
+                        continue
+                    tried.add(member.id)
+                    try:
+                        await self.rpc.request(
+                            member.address, ParticipateRequest(chunk), timeout=60.0, expect=Ack
+                        )
+                    except MapError as exc:
+                        last = exc
+                        log.warning("participating in %s via %s failed: %s", chunk, member.id, exc)
+                        continue
+                    await self.register(chunk)
+                    return self.store.chunk_table(chunk)
             raise last or ChunkNotFound(f"no holder of chunk {chunk} answered")
         finally:
             self.progress.pop(chunk, None)
@@ -361,6 +414,7 @@ class Replicator:
                 self.store.drop_chunk(chunk)
         finally:
             await self.locks.release(held)
+        await self.unregister(chunk)
         # The chunk's lock state stays: writers that still count us as a holder
         # may be queued here, and must get their turn (then see the smaller
         # holder set and lock again without us) rather than wait for a lock
@@ -423,16 +477,46 @@ class Replicator:
     async def find_holders(
         self, *, chunk: ChunkId | None = None, item: ItemId | None = None
     ) -> Holders:
-        """Ask every known member who holds `chunk` (or `item`); first answer wins.
+        """Who holds `chunk` (or `item`'s chunk): a chunk is looked up in the Chord
+        index first; otherwise, or when the index knows no holder, every known
+        member is asked and the first answer wins. The index does not know a
+        chunk's table: its `Holders.table` is empty.
 
         Raises:
-            NoPeersError: this peer knows no other member.
+            NoPeersError: the index knows no holder and this peer no other member.
             ChunkNotFound: nobody answered with a holder.
         """
+        if chunk is not None:
+            indexed = await self._find_in_index(chunk)
+            if indexed is not None:
+                return indexed
+        return await self._find_by_asking(HoldersQuery(chunk, item))
+
+    async def _find_in_index(self, chunk: ChunkId) -> Holders | None:
+        """The holders the Chord index lists for `chunk` (this peer left out), or
+        None when it lists none or cannot be reached."""
+        if self.chord is None:
+            return None
+        try:
+            raw = await self.chord.get(chunk_key(chunk))
+        except MapError as exc:
+            log.warning("the lookup index did not answer for %s: %s", chunk.short, exc)
+            return None
+        found: dict[PeerId, Member] = {}
+        for entry in sorted(raw):
+            try:
+                member = decode_holder(entry)
+            except ValueError as exc:
+                log.warning("bad holder entry for %s in the index: %s", chunk.short, exc)
+                continue
+            if member.id != self.me:
+                found[member.id] = member
+        return Holders(chunk, "", tuple(found.values())) if found else None
+
+    async def _find_by_asking(self, query: HoldersQuery) -> Holders:
         others = self.members.others()
         if not others:
             raise NoPeersError("this peer knows no other peer; `mapctl join ADDR` first")
-        query = HoldersQuery(chunk, item)
         pending = [
             asyncio.ensure_future(self.rpc.request(s.member.address, query, expect=Holders))
             for s in others
@@ -449,8 +533,87 @@ class Replicator:
             for fut in pending:
                 fut.cancel()
             await asyncio.gather(*pending, return_exceptions=True)
-        what = f"chunk {chunk}" if chunk else f"item {item}"
+        what = f"chunk {query.chunk}" if query.chunk else f"item {query.item}"
         raise ChunkNotFound(f"no known peer holds {what}")
+
+    # -- lookup by peer ------------------------------------------------------------------
+    def rpc_chunk_list_query(self, req: Request) -> ChunkList:
+        """The chunks this peer holds (of one table, or of all)."""
+        body: ChunkListQuery = req.body
+        if body.table and body.table not in self.store.tables():
+            raise UsageError(f"no table {body.table!r}")
+        chunks = self.store.chunks(body.table or None)
+        return ChunkList(tuple(ChunkSummary(c.id, c.table, c.items) for c in chunks))
+
+    # -- the lookup index (DESIGN §7, by reference) --------------------------------------
+    def index_on(self, chord: ChordNode) -> None:
+        """Use `chord` as the lookup index: announce every chunk only this peer
+        holds now (shared ones are announced again as `rejoin` makes this peer
+        their holder again) and refresh every announcement in the background."""
+        if self._refresher is not None:
+            raise UsageError("the lookup index is on already")
+        self.chord = chord
+        self._registered = {
+            c.id for c in self.store.chunks() if self.store.holders(c.id) in ([], [self.me])
+        }
+        self._refresher = asyncio.get_running_loop().create_task(
+            self._refresh_forever(), name=f"holder refresh {self.me.short}"
+        )
+
+    async def register(self, chunk: ChunkId) -> None:
+        """Announce this peer as a holder of `chunk` in the index, and keep doing
+        so until `unregister` (best effort: the refresh task retries)."""
+        self._registered.add(chunk)
+        await self._announce(chunk)
+
+    async def unregister(self, chunk: ChunkId) -> None:
+        """Take this peer out of `chunk`'s holders in the index (best effort: an
+        entry left behind expires with its time-to-live)."""
+        self._registered.discard(chunk)
+        if self.chord is None:
+            return
+        async with self._indexing:
+            try:
+                await self.chord.remove(chunk_key(chunk), encode_holder(self.members.me))
+            except MapError as exc:
+                log.warning("could not withdraw %s from the index: %s", chunk.short, exc)
+
+    async def _announce(self, chunk: ChunkId) -> None:
+        if self.chord is None:
+            return
+        async with self._indexing:
+            if chunk not in self._registered:  # unregistered while we waited
+                return
+            try:
+                await self.chord.add(
+                    chunk_key(chunk), encode_holder(self.members.me), self.holder_ttl
+                )
+            except MapError as exc:
+                log.warning("could not announce %s in the index: %s", chunk.short, exc)
+
+    async def refresh(self) -> None:
+        """Announce every registered chunk again (their time-to-live restarts)."""
+        for chunk in sorted(self._registered):
+            await self._announce(chunk)
+
+    async def _refresh_forever(self) -> None:
+        while True:
+            await self.refresh()
+            await asyncio.sleep(self.holder_ttl / 3)
+
+    async def withdraw_all(self) -> None:
+        """Stop refreshing and take this peer out of the index for every chunk
+        (a graceful stop; `index_on` after the next start announces them again)."""
+        await self.close()
+        for chunk in sorted(self._registered):
+            await self.unregister(chunk)
+
+    async def close(self) -> None:
+        """Stop the refresh task (idempotent)."""
+        task, self._refresher = self._refresher, None
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
 
 
 async def _all(calls: object) -> None:

@@ -1,9 +1,12 @@
-"""`Swarm`: the networked side of a peer: transport, membership, locks, replication.
+"""`Swarm`: the networked side of a peer: transport, membership, locks, replication
+and its node on the Chord ring (the lookup index).
 
 It owns the RPC endpoint and every task behind it; `Peer.start()` creates it
 and `Peer.close()` closes it. Membership is simple: a joiner says Hello to any
 member, learns every member from the Welcome, and says Hello to each of them;
-a graceful leave says Bye to all (DESIGN §6).
+a graceful leave says Bye to all (DESIGN §6). Every peer is also a node of
+the Chord ring over the same endpoint (DESIGN §7): it joins the ring with the
+swarm and hands its keys over when it leaves.
 """
 
 from __future__ import annotations
@@ -11,9 +14,11 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from mapapi.clock import LamportClock
-from mapapi.errors import JoinRefused, MapError
+from mapapi.dht.chord import ChordNode
+from mapapi.errors import JoinRefused, MapError, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import PeerId
 from mapapi.lock_client import LockService
@@ -23,10 +28,29 @@ from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
 from mapapi.net.rpc import Request, Rpc
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
-from mapapi.replication import Replicator
+from mapapi.replication import HOLDER_TTL, Replicator
 from mapapi.store.base import ReplicaStore
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class ChordOptions:
+    """Timing of the peer's Chord node and of its holder registrations (seconds).
+
+    Attributes:
+        stabilize, fix_fingers, check_predecessor: periods of the ring's repair tasks.
+        timeout: deadline of each request to another node.
+        holder_ttl: lifetime of a holder registration; refreshed every third of it.
+        successors: successor list length (also the number of copies of a key).
+    """
+
+    stabilize: float = 1.0
+    fix_fingers: float = 5.0
+    check_predecessor: float = 2.0
+    timeout: float = 2.0
+    holder_ttl: float = HOLDER_TTL
+    successors: int = 4
 
 
 class Swarm:
@@ -42,13 +66,23 @@ class Swarm:
         lease: float = 5.0,
         shaper: Shaper | None = None,
         on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
+        chord: ChordOptions | None = None,
     ) -> None:
         self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
         self._name = name
         self._peer_id = peer_id
         self.members = Members(Member(peer_id, "", name))
         self.locks = LockService(self.rpc, self.members, lease=lease)
-        self.replicator = Replicator(self.rpc, self.members, self.locks, store, on_applied)
+        self.chord_options = chord or ChordOptions()
+        self.replicator = Replicator(
+            self.rpc,
+            self.members,
+            self.locks,
+            store,
+            on_applied,
+            holder_ttl=self.chord_options.holder_ttl,
+        )
+        self._chord: ChordNode | None = None  # made by `start()`: it needs the address
         self.locks.admit = self.replicator.admit
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
@@ -63,14 +97,35 @@ class Swarm:
     async def start(self, listen: str) -> str:
         """Listen on `listen` (port 0 picks a free port); returns the real address."""
         address = await self.rpc.start(listen)
+        options = self.chord_options
+        self._chord = ChordNode(
+            self.rpc,
+            self._peer_id,
+            successors=options.successors,
+            stabilize_period=options.stabilize,
+            fix_fingers_period=options.fix_fingers,
+            check_predecessor_period=options.check_predecessor,
+            timeout=options.timeout,
+        )
         self.advertise(address)
+        self._chord.start()
+        self.replicator.index_on(self._chord)
         return address
+
+    @property
+    def chord(self) -> ChordNode:
+        """This peer's node on the Chord ring (after `start()`)."""
+        if self._chord is None:
+            raise UsageError("the swarm is not started")
+        return self._chord
 
     def advertise(self, address: str) -> None:
         """Tell other peers `address` instead of the bound one (before joining):
         a wildcard host such as tcp://0.0.0.0:7000 is no address they can reach."""
         self.members.me = Member(self._peer_id, address, self._name)
         self.members.add(self.members.me)
+        if self._chord is not None:
+            self._chord.readdress(address)
 
     # -- membership ------------------------------------------------------------------
     def rpc_hello(self, req: Request) -> Welcome:
@@ -83,8 +138,11 @@ class Swarm:
         return Welcome(tuple(self.members.all()))
 
     def rpc_bye(self, req: Request) -> Ack:
-        """A peer leaves the swarm gracefully."""
+        """A peer leaves the swarm gracefully (and the ring: route around it)."""
+        member = self.members.get(req.sender)
         self.members.remove(req.sender)
+        if member is not None and member.address and self._chord is not None:
+            self._chord.forget(member.address)
         return Ack()
 
     async def join(self, seed: str) -> list[Member]:
@@ -114,10 +172,37 @@ class Swarm:
                 for other in result.members:
                     if other.id != self._peer_id:
                         self.members.add(other)
+        await self._join_ring(seed)
         return self.members.all()
 
+    async def _join_ring(self, seed: str) -> None:
+        """Join the Chord ring through `seed` (or another member if it fails), then
+        announce this peer's chunks again: the keys may have other owners now.
+        A peer on the ring already stays where it is."""
+        chord = self.chord
+        if chord.successors == [chord.me] and chord.predecessor is None:
+            others = [s.member.address for s in self.members.others() if s.member.address != seed]
+            for address in [seed, *others]:
+                try:
+                    await chord.join(address)
+                    break
+                except MapError as exc:
+                    log.warning("could not join the lookup ring through %s: %s", address, exc)
+            else:
+                log.warning("not on the lookup ring: chunks are found by asking the members")
+        await self.replicator.refresh()
+
     async def leave(self) -> None:
-        """Say Bye to every other member (best effort, short deadline)."""
+        """Withdraw this peer's holder registrations, hand its keys of the ring
+        over to its successor, and say Bye to every other member (best effort,
+        short deadlines)."""
+        try:  # bounded: with its neighbours dead, every step would wait for a timeout
+            async with asyncio.timeout(3 * self.chord_options.timeout):
+                await self.replicator.withdraw_all()
+                if self._chord is not None:
+                    await self._chord.leave()
+        except (MapError, TimeoutError) as exc:
+            log.warning("left the lookup ring uncleanly (entries expire by themselves): %r", exc)
         await asyncio.gather(
             *(
                 self.rpc.request(s.member.address, Bye(), timeout=1.0)
@@ -127,6 +212,10 @@ class Swarm:
         )
 
     async def close(self) -> None:
-        """Stop renewals and close the endpoint (fails pending requests)."""
+        """Stop renewals and the ring's tasks, and close the endpoint (fails
+        pending requests)."""
+        await self.replicator.close()
+        if self._chord is not None:
+            await self._chord.close()
         await self.locks.close()
         await self.rpc.close()

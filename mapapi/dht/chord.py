@@ -144,6 +144,14 @@ class ChordNode:
         """This node's ring key."""
         return self.me.key
 
+    def readdress(self, address: str) -> None:
+        """Be reached at `address` instead of the Rpc's bound one (before joining:
+        a wildcard host is no address other nodes can reach)."""
+        alone = self.successors == [self.me]
+        self.me = Node(self.key, address)
+        if alone:
+            self.successors = [self.me]
+
     # -- lifecycle -------------------------------------------------------------------
     def start(self) -> None:
         """Start the periodic stabilize, fix-fingers and check-predecessor tasks."""
@@ -268,6 +276,15 @@ class ChordNode:
         if self.predecessor == node:
             self.predecessor = None
         return node.key
+
+    def forget(self, address: str) -> None:
+        """Route around the node at `address` for a while: it left (its peer said
+        Bye), so its place in our fingers and successor list is stale."""
+        for node in {n for n in (*self.successors, *self.fingers) if n is not None}:
+            if node.address == address and node != self.me:
+                self._suspect(node)
+        if self.predecessor is not None and self.predecessor.address == address:
+            self._suspect(self.predecessor)
 
     def _suspected(self) -> set[int]:
         now = time.monotonic()

@@ -280,6 +280,32 @@ class ChordStore:
     replicate: bool = False
 
 
+# -- lookup by peer (DESIGN §7) ----------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkListQuery:
+    """Which chunks do you hold (of `table`, or of every table when empty)?"""
+
+    table: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkSummary:
+    """One chunk a peer holds: its id, table and number of live items."""
+
+    chunk: ChunkId
+    table: str
+    items: int
+
+
+@dataclass(frozen=True, slots=True)
+class ChunkList:
+    """The answer to `ChunkListQuery`."""
+
+    chunks: tuple[ChunkSummary, ...]
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -304,6 +330,8 @@ SWARM_BODIES: dict[str, type] = {
     "chord_get": ChordGet,
     "chord_values": ChordValues,
     "chord_store": ChordStore,
+    "chunk_list_query": ChunkListQuery,
+    "chunk_list": ChunkList,
     "hello": Hello,
     "welcome": Welcome,
     "bye": Bye,

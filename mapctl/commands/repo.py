@@ -88,13 +88,22 @@ def chunk_create(session: Session, table_name: str, as_json: bool) -> None:
 
 @chunk.command("list")
 @click.option("--table", "table_name", help="Only chunks of this table.")
+@click.option(
+    "--peer",
+    "address",
+    metavar="ADDR",
+    help="List the chunks the peer at ADDR holds (asked over the network), e.g. "
+    "tcp://192.168.1.10:7000.",
+)
 @json_option
 @pass_session
-def chunk_list(session: Session, table_name: str | None, as_json: bool) -> None:
-    """List the chunks this peer holds."""
+def chunk_list(
+    session: Session, table_name: str | None, address: str | None, as_json: bool
+) -> None:
+    """List the chunks this peer (or the peer at --peer ADDR) holds."""
     from mapctl import render
 
-    info = session.call("chunk_list", table=table_name)
+    info = session.call("chunk_list", table=table_name, peer=address)
     if as_json:
         render.emit_json(info)
     else:

@@ -222,6 +222,18 @@ def test_clone_joins_and_participates_in_the_chosen_chunks(daemons: Daemons) -> 
     assert empty["chunks"] == []
     assert mapctl_json(nothing, "chunk", "list") == {"chunks": []}
 
+    # lookup by peer: a's chunks, asked through nothing's daemon and, from a
+    # repository with no daemon, over a connection of the command's own
+    held = sorted([(pts, "pts", 1), (poses, "poses", 1)])
+    listed = mapctl_json(nothing, "chunk", "list", "--peer", a.address)
+    assert sorted((c["id"], c["table"], c["items"]) for c in listed["chunks"]) == held
+    offline = daemons.root / "offline"
+    subprocess.run(
+        [MAPCTL, "init", str(offline)], check=True, capture_output=True, timeout=COMMAND_TIMEOUT
+    )
+    listed = mapctl_json(offline, "chunk", "list", "--peer", a.address, "--table", "pts")
+    assert listed == {"chunks": [{"id": pts, "table": "pts", "items": 1}]}
+
     one = daemons.root / "clone-one"
     daemons.adopt(one)
     picked = mapctl_json(daemons.root, "clone", a.join, str(one), "--chunks", poses)
