@@ -11,7 +11,6 @@ Validation is the same pure function either way.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -32,8 +31,6 @@ from mapapi.transaction import (
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
     from mapapi.lock_client import LockService
     from mapapi.replication import Replicator
-
-Applied = Callable[[CommitRecord, list[Revision]], None]
 
 
 @dataclass
@@ -108,19 +105,12 @@ def _read_ids(store: Store, tx: Transaction) -> set[ItemId]:
     return read_ids
 
 
-def _finish(tx: Transaction, decision: _Decision, on_applied: Applied | None) -> None:
-    tx.committed(decision.revisions)
-    if on_applied is not None and decision.record is not None:
-        on_applied(decision.record, decision.revisions)
-
-
 def commit_locally(
     store: Store,
     tx: Transaction,
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
-    on_applied: Applied | None = None,
 ) -> CommitRecord | None:
     """Commit `tx` against `store` atomically (no swarm).
 
@@ -134,25 +124,20 @@ def commit_locally(
         decision = _decide(store, tx, message, clock, try_merge)
         if decision.record is not None:
             store.apply_commit(decision.record, decision.revisions)
-    _finish(tx, decision, on_applied)
+    tx.committed(decision.revisions)
     return decision.record
 
 
-def _chunks_to_lock(store: Store, tx: Transaction) -> list[ChunkId]:
+def _chunks_to_lock(store: ReplicaStore, tx: Transaction) -> list[ChunkId]:
     """Written chunks, plus the chunks a serializable transaction read, in id order."""
     chunks = {c.chunk_id for c in tx.changes}
     if tx.isolation == "serializable":
         chunks |= {c for _, c in tx.scopes if c is not None}
-        chunks |= {cid for i in tx.read_set if (cid := _chunk_of(store, i)) is not None}
+        chunks |= {cid for i in tx.read_set if (cid := store.item_chunk(i)) is not None}
         for table, chunk in tx.scopes:
             if chunk is None:
                 chunks |= {c.id for c in store.chunks(table)}
     return sorted(chunks)
-
-
-def _chunk_of(store: Store, item_id: ItemId) -> ChunkId | None:
-    revision = store.read(item_id, store.clock())
-    return None if revision is None else revision.chunk_id
 
 
 async def commit_distributed(
@@ -163,7 +148,6 @@ async def commit_distributed(
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
-    on_applied: Applied | None = None,
 ) -> CommitRecord | None:
     """Commit `tx` across every holder of the chunks it touches.
 
@@ -206,5 +190,5 @@ async def commit_distributed(
                 Held(h.chunk, {p: t for p, t in h.tokens.items() if p == locks.me}) if pushed else h
             )
             await locks.release(mine)
-    _finish(tx, decision, on_applied)
+    tx.committed(decision.revisions)
     return decision.record

@@ -85,7 +85,6 @@ class Replicator:
         members: Members,
         locks: LockService,
         store: ReplicaStore,
-        on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
         *,
         holder_ttl: float = HOLDER_TTL,
     ) -> None:
@@ -95,7 +94,6 @@ class Replicator:
         self.members = members
         self.locks = locks
         self.store = store
-        self.on_applied = on_applied
         self._staged: dict[tuple[ChunkId, CommitId], tuple[CommitRecord, list[Revision]]] = {}
         self._incoming: dict[ChunkId, list[ChunkPart]] = {}
         self._wanted: dict[ChunkId, int] = {}  # chunks asked for -> participations waiting
@@ -157,8 +155,6 @@ class Replicator:
             )
         record, revisions = staged
         self.store.apply_commit(record, revisions)
-        if self.on_applied is not None:
-            self.on_applied(record, revisions)
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 

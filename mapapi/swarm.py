@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass
 
 from mapapi.clock import LamportClock
 from mapapi.dht.chord import ChordNode
 from mapapi.errors import JoinRefused, MapError, UsageError
-from mapapi.history import CommitRecord, Revision
 from mapapi.ids import PeerId
 from mapapi.lock_client import LockService
 from mapapi.membership import Members
@@ -65,7 +63,6 @@ class Swarm:
         *,
         lease: float = 5.0,
         shaper: Shaper | None = None,
-        on_applied: Callable[[CommitRecord, list[Revision]], None] | None = None,
         chord: ChordOptions | None = None,
     ) -> None:
         self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
@@ -79,7 +76,6 @@ class Swarm:
             self.members,
             self.locks,
             store,
-            on_applied,
             holder_ttl=self.chord_options.holder_ttl,
         )
         self._chord: ChordNode | None = None  # made by `start()`: it needs the address
