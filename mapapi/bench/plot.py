@@ -9,6 +9,7 @@ dependency and is imported only here.
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
@@ -180,4 +181,54 @@ def plot_commit(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
     )
     ax.set_title("Uncontended commit (mapctl bench commit): latency against holders", fontsize=10)
     _finish(fig, ax, messages, rows, output)
+    plt.close(fig)
+
+
+def plot_lookup(
+    rows: Sequence[dict[str, Any]],
+    output: str | Path,
+    environment: dict[str, Any] | None = None,
+) -> None:
+    """Chord lookup hops (mean, p99) and latency (p50, p99) against ring size N,
+    with the target mean ½·log2 N + 1 (`mapctl bench lookup --plot`).
+
+    Args:
+        rows: `bench lookup --json` objects; several runs of one N are all drawn.
+        output: the PNG to write.
+        environment: the caption's machine, Python and load when `rows` lack
+            them (`mapapi.bench.lookup.environment()`, taken before the runs).
+    """
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    plt = _pyplot()
+    rows = [{**(environment or {}), **row} for row in rows]
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    _series(ax, _by(rows, "peers", "mean_hops"), "mean hops", marker="o", color="tab:blue")
+    _series(ax, _by(rows, "peers", "p99_hops"), "p99 hops", marker="^", ls=":", color="tab:blue")
+    sizes = sorted({int(r["peers"]) for r in rows})
+    targets = [0.5 * math.log2(n) + 1 for n in sizes]
+    ax.plot(sizes, targets, color="tab:red", ls="--", lw=1, label="target mean: ½·log2 N + 1")
+    _frame(
+        ax, "Chord nodes N (log scale; all in one process and event loop)", "hops", rows, "peers"
+    )
+    ax.set_xscale("log", base=2)
+    ax.xaxis.set_major_formatter(ScalarFormatter())  # 8, 16, ... rather than 2^3, 2^4, ...
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    latency = _right_axis(ax, _by(rows, "peers", "p50_ms"), "p50 latency, ms", "grey")
+    _series(
+        latency,
+        _by(rows, "peers", "p99_ms"),
+        "p99 latency, ms (right axis)",
+        marker="v",
+        ls=":",
+        lw=1,
+        color="grey",
+        alpha=0.6,
+    )
+    latency.set_ylabel("lookup latency, ms")
+    latency.autoscale(axis="y")  # `_right_axis` froze the top before the p99 series
+    for axis in (ax, latency):  # headroom: the legend sits above the data, not on it
+        axis.set_ylim(0, 1.5 * axis.get_ylim()[1])
+    ax.set_title("Chord lookups (mapctl bench lookup): hops and latency against N", fontsize=10)
+    _finish(fig, ax, latency, rows, output)
     plt.close(fig)

@@ -120,6 +120,63 @@ def bench_commit(
     _render(f"bench commit: {holders} holders", result, as_json)
 
 
+@bench.command("lookup")
+@click.option(
+    "--peers",
+    "-p",
+    "peers",
+    multiple=True,
+    type=click.IntRange(1, 256),
+    help="Chord nodes on the ring (repeat for several rings; default 32).",
+)
+@click.option("--sweep", is_flag=True, help="Also run N = 8, 16, 32, 64 and 128.")
+@click.option(
+    "--lookups",
+    "-n",
+    default=1000,
+    show_default=True,
+    type=click.IntRange(1),
+    help="Timed lookups per ring, each from a random node.",
+)
+@click.option(
+    "--seed", default=0, show_default=True, help="Seeds node ids, joins and keys (hops repeat)."
+)
+@click.option(
+    "--plot",
+    "plot",
+    type=click.Path(dir_okay=False),
+    help="Also write a PNG of hops and latency against N (needs matplotlib).",
+)
+@json_option
+def bench_lookup(
+    peers: tuple[int, ...],
+    sweep: bool,
+    lookups: int,
+    seed: int,
+    plot: str | None,
+    as_json: bool,
+) -> None:
+    """Chord lookups on a ring of N nodes in this process: hops and latency.
+
+    Every answer is checked against a sorted-ring oracle; a wrong answer or a
+    failed lookup counts in `errors`. With --json, one object per ring, one per
+    line.
+    """
+    from mapapi.bench.lookup import SWEEP, environment, measure_lookups
+
+    sizes = sorted({*peers, *SWEEP}) if sweep else list(dict.fromkeys(peers or (32,)))
+    machine = environment()  # before the runs, whose own load would count otherwise
+    results = []
+    for size in sizes:
+        result = measure_lookups(size, lookups, seed=seed)
+        _render(f"bench lookup: {size} peers", result, as_json)
+        results.append(result)
+    if plot:
+        from mapapi.bench.plot import plot_lookup
+
+        plot_lookup(results, plot, machine)
+
+
 @bench.command("plot")
 @click.argument("kind", type=click.Choice(["viewtest", "commit"]))
 @click.argument("results", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
