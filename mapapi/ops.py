@@ -446,6 +446,31 @@ class Operations:
                 entry["holders"].append(member)
         return {"chunks": [found[k] for k in sorted(found)]}
 
+    async def query_bbox(self, bbox: list[float], table: str | None = None) -> Json:
+        """The chunks (and the missions they hold) whose box overlaps `bbox`
+        (xmin, ymin, zmin, xmax, ymax, zmax), with their holders."""
+        from mapapi.spatial import BBox
+
+        box = BBox.from_tuple(bbox)
+        results = []
+        for found in await self.peer.query_bbox(box, table):
+            ref = found.ref
+            results.append(
+                {
+                    "ref": ref.chunk,
+                    "kind": "mission" if ref.missions else "chunk",
+                    "chunk": ref.chunk,
+                    "table": ref.table,
+                    "missions": list(ref.missions),
+                    "bbox": list(ref.bbox.as_tuple()),
+                    "holders": [
+                        {"id": m.id, "name": m.name, "address": m.address} for m in found.holders
+                    ],
+                    "held": found.held,
+                }
+            )
+        return {"results": results}
+
     async def shutdown(self) -> Json:
         """Stop the peer daemon gracefully (`mapctl peer stop`)."""
         if self.on_shutdown is None:

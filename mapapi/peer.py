@@ -10,15 +10,19 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mapapi.chunk_places import ChunkPlaces
 from mapapi.clock import LamportClock
 from mapapi.commit import commit_distributed, commit_locally
 from mapapi.errors import ChunkNotFound, NotParticipatingError, PeerNotRunning, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.repo import Repository
+from mapapi.spatial import BBox, SpatialGrid
+from mapapi.spatial_index import QueryStats, SpatialRef
 from mapapi.store import ChunkInfo, MemoryStore
 from mapapi.store.base import ReplicaStore
 from mapapi.table import TableDescriptor
@@ -37,15 +41,32 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True, slots=True)
+class PlacedChunk:
+    """A chunk a spatial query found: where it lies, who holds it, and whether
+    this peer does."""
+
+    ref: SpatialRef
+    holders: tuple[Member, ...]
+    held: bool
+
+
 class Peer:
     """One peer and its local map repository."""
 
     def __init__(
-        self, store: ReplicaStore, peer_id: PeerId | None = None, *, name: str = ""
+        self,
+        store: ReplicaStore,
+        peer_id: PeerId | None = None,
+        *,
+        name: str = "",
+        grid: SpatialGrid | None = None,
     ) -> None:
         self.store = store
         self.id = peer_id or PeerId.new()
         self.name = name or self.id.short
+        self.grid = grid or SpatialGrid()
+        self.places = ChunkPlaces(store)
         self.clock = LamportClock(store.clock())
         self.swarm: Swarm | None = None
         self._descriptors: dict[str, TableDescriptor] = {}
@@ -55,7 +76,8 @@ class Peer:
     def open(cls, path: str | Path = ".") -> Peer:
         """The peer of the repository at (or above) `path`."""
         repo = Repository.find(path)
-        return cls(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+        config = repo.config
+        return cls(repo.open_store(), config.peer_id, name=config.name, grid=config.spatial)
 
     @classmethod
     def in_memory(cls) -> Peer:
@@ -104,7 +126,15 @@ class Peer:
         if self.swarm is not None:
             raise UsageError(f"peer already listens on {self.swarm.address}")
         swarm = Swarm(
-            self.id, self.name, self.store, self.clock, lease=lease, shaper=shaper, chord=chord
+            self.id,
+            self.name,
+            self.store,
+            self.clock,
+            lease=lease,
+            shaper=shaper,
+            chord=chord,
+            places=self.places,
+            grid=self.grid,
         )
         address = await swarm.start(listen)
         self.swarm = swarm
@@ -171,6 +201,48 @@ class Peer:
 
         rpc = self.swarm.rpc if self.swarm is not None else None
         return await ask_chunk_list(address, table, rpc=rpc)
+
+    async def query_bbox(
+        self, box: BBox, table: str | None = None, stats: QueryStats | None = None
+    ) -> list[PlacedChunk]:
+        """The chunks whose box overlaps `box` (of `table`, if given), with their
+        holders, sorted by chunk id (DESIGN §7). On the network the spatial index
+        is asked (chunks held here are added even before their announcement
+        lands); alone, only the chunks held here are searched. A box partly
+        outside the index's bounds is clamped; one fully outside matches nothing.
+
+        Raises:
+            QueryError: no owner of the box's cells answered.
+        """
+        if self.grid.clamp(box) is None:
+            return []
+        found: dict[ChunkId, SpatialRef] = {}
+        if self.swarm is not None and self.swarm.index is not None:
+            for ref in await self.swarm.index.query(box, table, stats=stats):
+                found[ref.chunk] = ref
+        for ref in self.places.placed():  # what is held here is current
+            inside = self.grid.clamp(ref.bbox) is not None  # as the index would have it
+            if inside and ref.bbox.overlaps(box) and table in (None, ref.table):
+                found[ref.chunk] = ref
+        held = {c.id for c in self.store.chunks()}
+        return [self._holders_of(found[c], c in held) for c in sorted(found)]
+
+    def _holders_of(self, ref: SpatialRef, held: bool) -> PlacedChunk:
+        if held:
+            ids = self.store.holders(ref.chunk) or [self.id]
+            return PlacedChunk(ref, tuple(self._member(p) for p in ids), held=True)
+        from mapapi.net.messages import Member
+
+        return PlacedChunk(ref, tuple(Member(p, a) for p, a in ref.holders), held=False)
+
+    def _member(self, peer: PeerId) -> Member:
+        from mapapi.net.messages import Member
+
+        if peer == self.id:
+            address = self.swarm.address if self.swarm is not None else ""
+            return Member(self.id, address, self.name)
+        known = self.swarm.members.get(peer) if self.swarm is not None else None
+        return known or Member(peer, "")
 
     async def __aenter__(self) -> Peer:
         return self
@@ -300,16 +372,24 @@ class Peer:
         """Validate and apply a transaction (see `mapapi.commit`)."""
         if self.swarm is None:
             self._refuse_shared(tx)
-            return commit_locally(self.store, tx, message, self.clock, self._try_merge)
-        return await commit_distributed(
-            self.store,
-            self.swarm.locks,
-            self.swarm.replicator,
-            tx,
-            message,
-            self.clock,
-            self._try_merge,
-        )
+            record = commit_locally(self.store, tx, message, self.clock, self._try_merge)
+        else:
+            record = await commit_distributed(
+                self.store,
+                self.swarm.locks,
+                self.swarm.replicator,
+                tx,
+                message,
+                self.clock,
+                self._try_merge,
+            )
+        if record is not None:
+            # Registered at commit (DESIGN §7): a query right after finds the new box.
+            chunks = sorted({c.chunk_id for c in tx.changes})
+            if self.places.caches(chunks):
+                self.places.applied(self.store.commit_revisions(record.id))
+            await self.places.update(chunks)
+        return record
 
     def _refuse_shared(self, tx: Transaction) -> None:
         """Alone, a commit may not touch a chunk other peers hold: they would never

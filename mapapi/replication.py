@@ -17,6 +17,7 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+from mapapi.dht.announce import Announcements, Entry
 from mapapi.dht.ring import chunk_key
 from mapapi.errors import (
     ChunkNotFound,
@@ -50,6 +51,7 @@ from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 
 if TYPE_CHECKING:
+    from mapapi.chunk_places import ChunkPlaces
     from mapapi.dht.chord import ChordNode
 
 log = logging.getLogger(__name__)
@@ -88,8 +90,6 @@ class Replicator:
         *,
         holder_ttl: float = HOLDER_TTL,
     ) -> None:
-        if not holder_ttl > 0:
-            raise ValueError(f"a time-to-live is a positive number of seconds, got {holder_ttl!r}")
         self.rpc = rpc
         self.members = members
         self.locks = locks
@@ -100,9 +100,8 @@ class Replicator:
         self.progress: dict[ChunkId, Progress] = {}
         self.chord: ChordNode | None = None  # the lookup index, once `index_on` ran
         self.holder_ttl = holder_ttl
-        self._registered: set[ChunkId] = set()  # chunks this peer announces as their holder
-        self._indexing = asyncio.Lock()  # one index update at a time: no add after its remove
-        self._refresher: asyncio.Task[None] | None = None
+        self.announced = Announcements(self._holder_entries, holder_ttl, "holder")
+        self.places: ChunkPlaces | None = None  # the chunks' boxes, kept current if set
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
             (CommitApply, self.rpc_commit_apply),
@@ -155,6 +154,8 @@ class Replicator:
             )
         record, revisions = staged
         self.store.apply_commit(record, revisions)
+        if self.places is not None:
+            self.places.applied(revisions)
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 
@@ -306,6 +307,8 @@ class Replicator:
             list({c.id: c for p in parts for c in p.commits}.values()),
             [m.id for m in part.holders],
         )
+        if self.places is not None:
+            self.places.forget(part.chunk)  # replaced wholesale
         return Ack()
 
     def rpc_holder_change(self, req: Request) -> Ack:
@@ -368,6 +371,8 @@ class Replicator:
                         log.warning("participating in %s via %s failed: %s", chunk, member.id, exc)
                         continue
                     await self.register(chunk)
+                    if self.places is not None:
+                        await self.places.update([chunk])
                     return self.store.chunk_table(chunk)
             raise last or ChunkNotFound(f"no holder of chunk {chunk} answered")
         finally:
@@ -411,6 +416,8 @@ class Replicator:
         finally:
             await self.locks.release(held)
         await self.unregister(chunk)
+        if self.places is not None:
+            await self.places.withdraw(chunk)
         # The chunk's lock state stays: writers that still count us as a holder
         # may be queued here, and must get their turn (then see the smaller
         # holder set and lock again without us) rather than wait for a lock
@@ -490,7 +497,7 @@ class Replicator:
 
     async def _find_in_index(self, chunk: ChunkId) -> Holders | None:
         """The holders the Chord index lists for `chunk` (this peer left out), or
-        None when it lists none or cannot be reached."""
+        None when it lists none or cannot be reached (logged)."""
         if self.chord is None:
             return None
         try:
@@ -546,70 +553,39 @@ class Replicator:
         """Use `chord` as the lookup index: announce every chunk only this peer
         holds now (shared ones are announced again as `rejoin` makes this peer
         their holder again) and refresh every announcement in the background."""
-        if self._refresher is not None:
-            raise UsageError("the lookup index is on already")
         self.chord = chord
-        self._registered = {
-            c.id for c in self.store.chunks() if self.store.holders(c.id) in ([], [self.me])
-        }
-        self._refresher = asyncio.get_running_loop().create_task(
-            self._refresh_forever(), name=f"holder refresh {self.me.short}"
-        )
+        alone = [c.id for c in self.store.chunks() if self.store.holders(c.id) in ([], [self.me])]
+        self.announced.start(chord, alone)
+
+    def _holder_entries(self, chunk: ChunkId) -> list[Entry]:
+        return [(chunk_key(chunk), encode_holder(self.members.me))]
 
     async def register(self, chunk: ChunkId) -> None:
         """Announce this peer as a holder of `chunk` in the index, and keep doing
         so until `unregister` (best effort: the refresh task retries)."""
-        self._registered.add(chunk)
-        await self._announce(chunk)
+        await self.announced.add(chunk)
 
     async def unregister(self, chunk: ChunkId) -> None:
         """Take this peer out of `chunk`'s holders in the index (best effort: an
         entry left behind expires with its time-to-live)."""
-        self._registered.discard(chunk)
-        if self.chord is None:
-            return
-        async with self._indexing:
-            try:
-                await self.chord.remove(chunk_key(chunk), encode_holder(self.members.me))
-            except MapError as exc:
-                log.warning("could not withdraw %s from the index: %s", chunk.short, exc)
-
-    async def _announce(self, chunk: ChunkId) -> None:
-        if self.chord is None:
-            return
-        async with self._indexing:
-            if chunk not in self._registered:  # unregistered while we waited
-                return
-            try:
-                await self.chord.add(
-                    chunk_key(chunk), encode_holder(self.members.me), self.holder_ttl
-                )
-            except MapError as exc:
-                log.warning("could not announce %s in the index: %s", chunk.short, exc)
+        await self.announced.remove(chunk)
 
     async def refresh(self) -> None:
         """Announce every registered chunk again (their time-to-live restarts)."""
-        for chunk in sorted(self._registered):
-            await self._announce(chunk)
-
-    async def _refresh_forever(self) -> None:
-        while True:
-            await self.refresh()
-            await asyncio.sleep(self.holder_ttl / 3)
+        await self.announced.refresh()
 
     async def withdraw_all(self) -> None:
         """Stop refreshing and take this peer out of the index for every chunk
         (a graceful stop; `index_on` after the next start announces them again)."""
-        await self.close()
-        for chunk in sorted(self._registered):
-            await self.unregister(chunk)
+        await self.announced.withdraw_all()
+        if self.places is not None:
+            await self.places.withdraw_all()
 
     async def close(self) -> None:
-        """Stop the refresh task (idempotent)."""
-        task, self._refresher = self._refresher, None
-        if task is not None:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
+        """Stop the refresh tasks (idempotent)."""
+        await self.announced.close()
+        if self.places is not None:
+            await self.places.close()
 
 
 async def _all(calls: object) -> None:

@@ -7,12 +7,19 @@ import logging
 import os
 import time
 import tomllib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mapapi.errors import AlreadyInitialisedError, CorruptRepoError, NotARepoError, UsageError
+from mapapi.errors import (
+    AlreadyInitialisedError,
+    CorruptRepoError,
+    MapError,
+    NotARepoError,
+    UsageError,
+)
 from mapapi.ids import PeerId
+from mapapi.spatial import SpatialGrid
 from mapapi.store.sqlite import SqliteStore
 
 REPO_DIR = ".mapapi"
@@ -34,22 +41,41 @@ def _toml_str(text: str) -> str:
 
 @dataclass(frozen=True)
 class RepoConfig:
-    """What `config.toml` holds."""
+    """What `config.toml` holds: the peer's name and id, and the geometry of the
+    spatial index (which every peer of a swarm must share, DESIGN §7)."""
 
     name: str
     peer_id: PeerId
+    spatial: SpatialGrid = field(default_factory=SpatialGrid)
 
     def to_toml(self) -> str:
-        """The config as TOML text (flat keys; strings quoted as JSON, valid TOML)."""
-        return f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n"
+        """The config as TOML text (strings quoted as JSON, valid TOML; floats
+        written with repr, which round-trips exactly)."""
+        grid = self.spatial.to_config()
+        bounds = ", ".join(repr(float(v)) for v in grid["bounds"])
+        cells = ", ".join(str(int(n)) for n in grid["cells"])
+        return (
+            f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n\n"
+            f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
+            f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
+            f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
+        )
 
     @classmethod
     def from_toml(cls, text: str, source: Path) -> RepoConfig:
-        """Parse config text; raises CorruptRepoError naming `source`."""
+        """Parse config text; raises CorruptRepoError naming `source` (a config
+        without a ``[spatial]`` table gets the default index geometry)."""
         try:
             data: dict[str, Any] = tomllib.loads(text)
-            return cls(name=str(data["name"]), peer_id=PeerId(data["peer_id"]))
-        except (tomllib.TOMLDecodeError, KeyError, ValueError) as exc:
+            spatial = data.get("spatial", {})
+            if not isinstance(spatial, dict):
+                raise ValueError("[spatial] must be a table")
+            return cls(
+                name=str(data["name"]),
+                peer_id=PeerId(data["peer_id"]),
+                spatial=SpatialGrid.from_config(spatial),
+            )
+        except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
             raise CorruptRepoError(f"{source} is damaged: {exc}") from exc
 
 
@@ -124,8 +150,12 @@ class Repository:
         return self.meta_dir / CONTROL_SOCKET
 
     @classmethod
-    def init(cls, path: str | Path, name: str | None = None) -> Repository:
-        """Create a repository in `path` (created if missing).
+    def init(
+        cls, path: str | Path, name: str | None = None, spatial: SpatialGrid | None = None
+    ) -> Repository:
+        """Create a repository in `path` (created if missing), with the spatial
+        index geometry `spatial` (default: `mapapi.spatial.DEFAULT_BOUNDS` and
+        `DEFAULT_CELLS`).
 
         Raises:
             AlreadyInitialisedError: `path` already holds one.
@@ -137,7 +167,9 @@ class Repository:
                 f"{root} is already a map repository; use it as is, or init another folder"
             )
         meta.mkdir(parents=True, exist_ok=True)
-        config = RepoConfig(name=name or root.name, peer_id=PeerId.new())
+        config = RepoConfig(
+            name=name or root.name, peer_id=PeerId.new(), spatial=spatial or SpatialGrid()
+        )
         SqliteStore(meta / STORE, create=True).close()
         tmp = meta / (CONFIG + ".tmp")
         tmp.write_text(config.to_toml(), encoding="utf-8")

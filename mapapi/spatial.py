@@ -88,7 +88,7 @@ class BBox:
     @classmethod
     def from_tuple(cls, values: Sequence[float]) -> BBox:
         """The box ``(xmin, ymin, zmin, xmax, ymax, zmax)``, the order the CLI and
-        `TableDescriptor.bbox` use.
+        `mapapi.extent` use.
 
         Raises:
             InvalidBBox: not six values, or invalid as for the constructor.

@@ -15,6 +15,7 @@ import asyncio
 import logging
 from dataclasses import dataclass
 
+from mapapi.chunk_places import ChunkPlaces
 from mapapi.clock import LamportClock
 from mapapi.dht.chord import ChordNode
 from mapapi.errors import JoinRefused, MapError, UsageError
@@ -27,6 +28,8 @@ from mapapi.net.rpc import Request, Rpc
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.replication import HOLDER_TTL, Replicator
+from mapapi.spatial import SpatialGrid
+from mapapi.spatial_index import SpatialIndex
 from mapapi.store.base import ReplicaStore
 
 log = logging.getLogger(__name__)
@@ -39,7 +42,8 @@ class ChordOptions:
     Attributes:
         stabilize, fix_fingers, check_predecessor: periods of the ring's repair tasks.
         timeout: deadline of each request to another node.
-        holder_ttl: lifetime of a holder registration; refreshed every third of it.
+        holder_ttl: lifetime of a holder registration and of a chunk's box in the
+            spatial index; each is refreshed every third of it.
         successors: successor list length (also the number of copies of a key).
     """
 
@@ -64,8 +68,13 @@ class Swarm:
         lease: float = 5.0,
         shaper: Shaper | None = None,
         chord: ChordOptions | None = None,
+        places: ChunkPlaces | None = None,
+        grid: SpatialGrid | None = None,
     ) -> None:
         self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
+        self.grid = grid or SpatialGrid()
+        self.places = places or ChunkPlaces(store)
+        self.index: SpatialIndex | None = None  # made by `start()`, over the ring
         self._name = name
         self._peer_id = peer_id
         self.members = Members(Member(peer_id, "", name))
@@ -106,6 +115,11 @@ class Swarm:
         self.advertise(address)
         self._chord.start()
         self.replicator.index_on(self._chord)
+        self.index = SpatialIndex(self._chord, self.grid)
+        self.replicator.places = self.places
+        self.places.start(
+            self._chord, self.index, options.holder_ttl, lambda: (self._peer_id, self.address)
+        )
         return address
 
     @property
@@ -129,6 +143,12 @@ class Swarm:
         member: Member = req.body.member
         if member.id != req.sender or not member.address:
             raise JoinRefused("Hello must carry the sender's own id and address")
+        if req.body.index != self.grid.config_fingerprint():
+            raise JoinRefused(
+                f"the spatial index differs: this swarm uses {self.grid.describe()}; "
+                "every peer needs the same [spatial] bounds and cells in .mapapi/config.toml "
+                "(set with `mapctl init --bounds ... --cells ...`)"
+            )
         self.members.add(member)
         self.members.touch(member.id)
         return Welcome(tuple(self.members.all()))
@@ -148,7 +168,7 @@ class Swarm:
             JoinRefused: the seed refused, or answered like no mapapi peer.
             NetworkError: the seed did not answer in time.
         """
-        hello = Hello(self.members.me)
+        hello = Hello(self.members.me, self.grid.config_fingerprint())
         try:
             welcome = await self.rpc.request(seed, hello, expect=Welcome)
         except MapError:

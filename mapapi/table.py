@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from google.protobuf import json_format, message_factory, struct_pb2, wrappers_pb2
@@ -49,9 +48,6 @@ def message_class(type_name: str) -> type[Message]:
     return message_factory.GetMessageClass(descriptor)
 
 
-BBoxFn = Callable[[Message], tuple[float, float, float, float, float, float] | None]
-
-
 @dataclass(frozen=True)
 class TableDescriptor:
     """A named collection of items of one protobuf message type.
@@ -59,13 +55,12 @@ class TableDescriptor:
     Attributes:
         name: the table's name, unique in a repository.
         message_type: the payload class; `google.protobuf.Struct` holds schemaless JSON.
-        bbox: optional function giving an item's bounding box (xmin, ymin, zmin,
-            xmax, ymax, zmax), used by the spatial index.
+
+    Where an item lies in space depends on its type alone (`mapapi.extent`).
     """
 
     name: str
     message_type: type[Message]
-    bbox: BBoxFn | None = field(default=None, compare=False)
 
     @classmethod
     def named(cls, name: str, type_name: str) -> TableDescriptor:

@@ -2,11 +2,8 @@
 
 N `ChordNode`s, each on its own real `Rpc` over `ZmqTransport` bound to
 127.0.0.1 port 0, all in this process and one event loop, as in
-`tests/swarm/test_chord.py`. Nodes join one by one through a random earlier
-node; the benchmark then drives stabilize / check-predecessor rounds itself
-until every successor list and predecessor matches the `SortedRing` oracle,
-fixes every finger table once, and checks the fingers against the oracle too,
-all within a bound on rounds. It then times L lookups of random keys, one at a
+`tests/swarm/test_chord.py`, built and converged by `mapapi.bench.ring`
+within a bound on rounds. It then times L lookups of random keys, one at a
 time, each from a random node, and checks every answer against the oracle.
 
 Nothing here asserts a speed; the figures go to docs/benchmarks.md. The Chord
@@ -27,15 +24,14 @@ import os
 import random
 import statistics
 import time
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
+from mapapi.bench.ring import still_ring
 from mapapi.bench.swarm import _environment, percentile
 from mapapi.dht.chord import ChordNode
 from mapapi.dht.ring import RING_SIZE, SortedRing
-from mapapi.errors import MapError, NetworkError
-from mapapi.ids import PeerId
-from mapapi.net import Rpc, ZmqTransport
+from mapapi.errors import NetworkError
 
 log = logging.getLogger(__name__)
 
@@ -44,13 +40,6 @@ DEFAULT_LOOKUPS = 1000
 
 SWEEP = (8, 16, 32, 64, 128)
 """The ring sizes of `mapctl bench lookup --sweep`."""
-
-SUCCESSORS = 4  # successor list length, as the peers use
-TIMEOUT = 2.0  # seconds per request; no node dies here, so only a bug reaches it
-
-
-class RingNotStable(MapError):
-    """The benchmark's ring did not match the oracle within its bound on rounds."""
 
 
 def target_mean_hops(peers: int) -> float:
@@ -98,16 +87,10 @@ def measure_lookups(
 
 
 async def _measure(peers: int, lookups: int, rng: random.Random, max_rounds: int) -> dict[str, Any]:
-    nodes: list[ChordNode] = []
     started = time.perf_counter()
-    try:
-        await _build(nodes, peers, rng)
-        rounds = await _converge(nodes, max_rounds)
+    async with still_ring(peers, rng, max_rounds=max_rounds) as nodes:
         setup = time.perf_counter() - started
-        log.info("ring of %d nodes stable after %d rounds, %.1f s", peers, rounds, setup)
         hops, millis, errors = await _time_lookups(nodes, lookups, rng)
-    finally:
-        await asyncio.gather(*(node.rpc.close() for node in nodes))
     return {
         "peers": peers,
         "lookups": lookups,
@@ -119,78 +102,6 @@ async def _measure(peers: int, lookups: int, rng: random.Random, max_rounds: int
         "errors": errors,
         "setup_s": round(setup, 2),
     }
-
-
-async def _build(nodes: list[ChordNode], peers: int, rng: random.Random) -> None:
-    """Start `peers` nodes into `nodes` (so the caller closes them whatever happens)
-    and join each through a random earlier one."""
-    for _ in range(peers):
-        peer_id = PeerId(f"{rng.getrandbits(128):032x}")
-        rpc = Rpc(ZmqTransport(peer_id))
-        try:
-            await rpc.start("tcp://127.0.0.1:0")
-        except BaseException:
-            await rpc.close()
-            raise
-        # The periodic tasks are never started (`start()`): the benchmark drives
-        # every round itself, so the ring is still while lookups are timed.
-        node = ChordNode(rpc, peer_id, successors=SUCCESSORS, timeout=TIMEOUT)
-        if nodes:
-            await node.join(rng.choice(nodes).me.address)
-        nodes.append(node)
-
-
-async def _converge(nodes: list[ChordNode], max_rounds: int) -> int:
-    """Stabilize until the ring matches the oracle, then fix the fingers; returns
-    the rounds taken.
-
-    Raises:
-        RingNotStable: not done within `max_rounds`.
-    """
-    oracle = SortedRing(node.key for node in nodes)
-    for rounds in range(1, max_rounds + 1):
-        if not _ring_ok(nodes, oracle):
-            await _each(nodes, ChordNode.stabilize_once)
-            await _each(nodes, ChordNode.check_predecessor_once)
-            continue
-        # Lookups are exact once successor lists are, so one pass of
-        # fix_fingers should fill every table; the check guards against a bug.
-        await _each(nodes, ChordNode.fix_fingers_once)
-        if _fingers_ok(nodes, oracle):
-            return rounds
-    raise RingNotStable(
-        f"the ring of {len(nodes)} nodes did not match the sorted-ring oracle after "
-        f"{max_rounds} rounds: a Chord bug; reproduce with tests/swarm/test_chord.py"
-    )
-
-
-async def _each(nodes: Sequence[ChordNode], step: Callable[[ChordNode], Awaitable[None]]) -> None:
-    """Run one maintenance step on every node at once, as the periodic tasks would.
-
-    A `MapError` of one node is logged and left to the next round to repair (as
-    `ChordNode._every` does); anything else is a bug and propagates.
-    """
-    results = await asyncio.gather(*(step(node) for node in nodes), return_exceptions=True)
-    for node, result in zip(nodes, results, strict=True):
-        if isinstance(result, MapError):
-            log.debug("%s failed on %s: %s", step.__name__, node.me.address, result)
-        elif isinstance(result, BaseException):
-            raise result
-
-
-def _ring_ok(nodes: Sequence[ChordNode], oracle: SortedRing) -> bool:
-    return all(
-        [s.key for s in node.successors] == oracle.successor_list(node.key, SUCCESSORS)
-        and (node.predecessor or node.me).key == oracle.predecessor(node.key)
-        for node in nodes
-    )
-
-
-def _fingers_ok(nodes: Sequence[ChordNode], oracle: SortedRing) -> bool:
-    return all(
-        [None if f is None else f.key for f in node.fingers] == oracle.finger_table(node.key)
-        for node in nodes
-    )
 
 
 async def _time_lookups(

@@ -46,6 +46,10 @@ log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 
+MemberFilter = Callable[[bytes], Callable[[bytes], bool]]
+"""A named server-side filter of `ChordNode.get`: given the query's argument, the
+predicate each stored member must pass. It raises ValueError on a bad argument."""
+
 _KEY_BYTES = ring.RING_BITS // 8
 _MAX_HOPS = 2 * ring.RING_BITS
 _ATTEMPTS = 4
@@ -126,6 +130,8 @@ class ChordNode:
         self._fixing = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
         self._round = asyncio.Event()  # set (and replaced) after each periodic step
+        self._filters: dict[str, MemberFilter] = {}
+        self.requests_sent = 0  # to other nodes, for benchmarks (paper Fig. 8)
         self._handlers: dict[type, Callable[[Request], Any]] = {
             ChordFindSuccessor: self.rpc_find_successor,
             ChordGetNeighbours: self.rpc_get_neighbours,
@@ -370,9 +376,22 @@ class ChordNode:
         """Remove `member` from the set under `key`."""
         await self._at_owner(key, ChordRemove(key_bytes(key), member), Ack)
 
-    async def get(self, key: int) -> set[bytes]:
-        """The live members under `key`."""
-        values = await self._at_owner(key, ChordGet(key_bytes(key)), ChordValues)
+    def register_filter(self, name: str, member_filter: MemberFilter) -> None:
+        """Let `get(key, filter=name, ...)` keep only the members `member_filter`
+        passes, evaluated at the key's owner. Every node of the ring must
+        register the same filters (the peers of one version do)."""
+        self._filters[name] = member_filter
+
+    async def get(self, key: int, filter: str = "", argument: bytes = b"") -> set[bytes]:
+        """The live members under `key`; with `filter`, those the owner's filter of
+        that name keeps for `argument`.
+
+        Raises:
+            NetworkError: the key's owner could not be reached.
+            ProtocolError: the owner has no such filter, or refused the argument.
+        """
+        body = ChordGet(key_bytes(key), filter, argument)
+        values = await self._at_owner(key, body, ChordValues)
         return set(values.members)
 
     async def _at_owner(self, key: int, body: object, expect: type[T]) -> T:
@@ -422,6 +441,7 @@ class ChordNode:
                 result = await result
             assert isinstance(result, expect)
             return result
+        self.requests_sent += 1
         return await self.rpc.request(node.address, body, timeout=self.timeout, expect=expect)
 
     def rpc_find_successor(self, req: Request) -> ChordHop:
@@ -490,9 +510,19 @@ class ChordNode:
         return Ack()
 
     def rpc_get(self, req: Request) -> ChordValues:
-        """The live members of a key stored here."""
-        key = key_from(req.body.key)
-        return ChordValues(tuple(sorted(self.storage.get(key, self.clock()))))
+        """The live members of a key stored here (those the filter keeps, if any)."""
+        body: ChordGet = req.body
+        members = self.storage.get(key_from(body.key), self.clock())
+        if body.filter:
+            make = self._filters.get(body.filter)
+            if make is None:
+                raise ProtocolError(f"no member filter {body.filter!r} on this node")
+            try:
+                keep = make(body.argument)
+            except ValueError as exc:
+                raise ProtocolError(f"bad argument to filter {body.filter!r}: {exc}") from exc
+            members = {m for m in members if keep(m)}
+        return ChordValues(tuple(sorted(members)))
 
     async def rpc_store(self, req: Request) -> Ack:
         """Store handed-over or replicated entries; with `replicate`, copy them on."""

@@ -39,8 +39,6 @@ MAP_TABLES: dict[str, type[Message]] = {
 }
 _KIND = {kind: Edge.Kind.Value(kind.name) for kind in EdgeKind}
 
-BBoxTuple = tuple[float, float, float, float, float, float]
-
 
 def box_to_pb(box: BBox) -> maps_pb2.Box3:
     """A `BBox` as its message."""
@@ -96,17 +94,3 @@ def edge_from_pb(message: maps_pb2.Edge) -> GraphEdge:
         tuple(message.information),
         EdgeKind(message.kind),
     )
-
-
-def mission_bbox(message: maps_pb2.Mission) -> BBoxTuple | None:
-    """A mission row's box, for `TableDescriptor.bbox` (the spatial index)."""
-    if not message.HasField("bbox"):
-        return None
-    b = message.bbox
-    return (b.xmin, b.ymin, b.zmin, b.xmax, b.ymax, b.zmax)
-
-
-def vertex_bbox(message: maps_pb2.Vertex) -> BBoxTuple:
-    """A vertex row's position as a point box, for `TableDescriptor.bbox`."""
-    p = message.pose
-    return (p.x, p.y, p.z, p.x, p.y, p.z)

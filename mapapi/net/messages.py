@@ -142,9 +142,11 @@ class Holders:
 
 @dataclass(frozen=True, slots=True)
 class Hello:
-    """A peer introduces itself; answered with `Welcome`."""
+    """A peer introduces itself; answered with `Welcome`. `index` is the
+    fingerprint of its spatial index geometry, which must equal the member's."""
 
     member: Member
+    index: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -251,9 +253,12 @@ class ChordRemove:
 
 @dataclass(frozen=True, slots=True)
 class ChordGet:
-    """The live members under `key`."""
+    """The live members under `key`; with `filter`, those the node's filter of
+    that name keeps for `argument`."""
 
     key: bytes
+    filter: str = ""
+    argument: bytes = b""
 
 
 @dataclass(frozen=True, slots=True)

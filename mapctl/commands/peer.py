@@ -203,7 +203,7 @@ def join(session: Session, address: str, as_json: bool) -> None:
         render.line(f"joined the swarm through {address}: {len(info['members'])} peer(s)")
 
 
-def _participate(session: Session, chunk_id: str) -> dict[str, Any]:
+def participate_with_progress(session: Session, chunk_id: str) -> dict[str, Any]:
     """Run `participate`, showing a progress bar once the chunk comes in several parts."""
     from mapctl import render
 
@@ -237,7 +237,7 @@ def chunk_participate(session: Session, chunk_id: str, as_json: bool) -> None:
     """Replicate chunk ID here: fetch it with its history, then receive every commit."""
     from mapctl import render
 
-    info = _participate(session, chunk_id)
+    info = participate_with_progress(session, chunk_id)
     if as_json:
         render.emit_json(info)
     else:
@@ -322,7 +322,7 @@ def clone(
     try:
         if wanted is None:
             wanted = [c["id"] for c in sub.call("swarm_chunks")["chunks"]]
-        done = [_participate(sub, chunk_id) for chunk_id in wanted]
+        done = [participate_with_progress(sub, chunk_id) for chunk_id in wanted]
     except MapError:
         render.note(
             f"the peer of {repo.root} keeps running; retry with `mapctl -C {repo.root} chunk "

@@ -12,14 +12,47 @@ from mapctl.session import Session, json_option, pass_session
 @click.command("init")
 @click.argument("path", type=click.Path(file_okay=False, path_type=Path), default=".")
 @click.option("--name", help="A name for this peer (default: the folder's name).")
+@click.option(
+    "--bounds",
+    nargs=6,
+    type=float,
+    metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX",
+    help="Space the spatial index covers, in metres [default: -1024 -1024 -128 1024 1024 128].",
+)
+@click.option(
+    "--cells",
+    nargs=3,
+    type=int,
+    metavar="NX NY NZ",
+    help="Cells of the spatial index along x, y, z [default: 32 32 1].",
+)
 @json_option
-def init(path: Path, name: str | None, as_json: bool) -> None:
-    """Create an empty map repository in PATH (default: here)."""
+def init(
+    path: Path,
+    name: str | None,
+    bounds: tuple[float, ...] | None,
+    cells: tuple[int, int, int] | None,
+    as_json: bool,
+) -> None:
+    """Create an empty map repository in PATH (default: here).
+
+    Every peer of a swarm must use the same spatial index (--bounds, --cells):
+    a peer with another one is refused when it joins.
+    """
     from mapapi import Repository
+    from mapapi.spatial import DEFAULT_BOUNDS, DEFAULT_CELLS, BBox, SpatialGrid
     from mapctl import render
 
-    repo = Repository.init(path, name)
-    info = {"path": str(repo.root), "name": repo.config.name, "peer_id": repo.config.peer_id}
+    grid = SpatialGrid(
+        BBox.from_tuple(bounds) if bounds else DEFAULT_BOUNDS, cells or DEFAULT_CELLS
+    )
+    repo = Repository.init(path, name, grid)
+    info = {
+        "path": str(repo.root),
+        "name": repo.config.name,
+        "peer_id": repo.config.peer_id,
+        "spatial": grid.to_config(),
+    }
     if as_json:
         render.emit_json(info)
     else:

@@ -317,10 +317,14 @@ class ChordRemove(_message.Message):
     def __init__(self, key: _Optional[bytes] = ..., member: _Optional[bytes] = ..., replica: _Optional[bool] = ...) -> None: ...
 
 class ChordGet(_message.Message):
-    __slots__ = ("key",)
+    __slots__ = ("key", "filter", "argument")
     KEY_FIELD_NUMBER: _ClassVar[int]
+    FILTER_FIELD_NUMBER: _ClassVar[int]
+    ARGUMENT_FIELD_NUMBER: _ClassVar[int]
     key: bytes
-    def __init__(self, key: _Optional[bytes] = ...) -> None: ...
+    filter: str
+    argument: bytes
+    def __init__(self, key: _Optional[bytes] = ..., filter: _Optional[str] = ..., argument: _Optional[bytes] = ...) -> None: ...
 
 class ChordValues(_message.Message):
     __slots__ = ("members",)
@@ -369,10 +373,12 @@ class ChunkList(_message.Message):
     def __init__(self, chunks: _Optional[_Iterable[_Union[ChunkSummary, _Mapping]]] = ...) -> None: ...
 
 class Hello(_message.Message):
-    __slots__ = ("member",)
+    __slots__ = ("member", "index")
     MEMBER_FIELD_NUMBER: _ClassVar[int]
+    INDEX_FIELD_NUMBER: _ClassVar[int]
     member: Member
-    def __init__(self, member: _Optional[_Union[Member, _Mapping]] = ...) -> None: ...
+    index: str
+    def __init__(self, member: _Optional[_Union[Member, _Mapping]] = ..., index: _Optional[str] = ...) -> None: ...
 
 class Welcome(_message.Message):
     __slots__ = ("members",)

@@ -1,0 +1,75 @@
+"""`query-bbox`: find (and load) the chunks and missions in a region."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from mapctl.session import Session, json_option, pass_session
+
+
+@click.command(
+    "query-bbox",
+    context_settings={"ignore_unknown_options": True},  # negative coordinates are no options
+)
+@click.argument("bbox", nargs=6, type=float, metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX")
+@click.option("--table", "-t", help="Only chunks of this table.")
+@click.option(
+    "--load", is_flag=True, help="Participate in every chunk found that is not held here."
+)
+@json_option
+@pass_session
+def query_bbox(
+    session: Session,
+    bbox: tuple[float, ...],
+    table: str | None,
+    load: bool,
+    as_json: bool,
+) -> None:
+    """List the chunks and missions whose box overlaps the box, with their holders.
+
+    The box is in metres, in the map frame. Off the network only the chunks
+    held here are searched; with a running peer the swarm's spatial index is.
+    A box partly outside the index's bounds is clamped; one fully outside
+    matches nothing.
+    """
+    from mapctl import render
+    from mapctl.commands.peer import participate_with_progress
+
+    info: dict[str, Any] = session.call("query_bbox", bbox=list(bbox), table=table)
+    results = info["results"]
+    if load:
+        missing = [r for r in results if not r["held"]]
+        for number, result in enumerate(missing, 1):
+            if not as_json:
+                render.note(f"loading {number}/{len(missing)}: chunk {result['chunk']}")
+            loaded = participate_with_progress(session, result["chunk"])
+            result["held"] = True
+            result["holders"] = [{"id": p, "name": "", "address": ""} for p in loaded["holders"]]
+    if as_json:
+        render.emit_json(info)
+        return
+    if not results:
+        render.line("nothing found in that box")
+        return
+    render.table(
+        "chunks in the box",
+        ["chunk", "table", "missions", "bbox", "holders", "here"],
+        [
+            (
+                r["chunk"][:8],
+                r["table"],
+                ", ".join(r["missions"]) or "-",
+                " ".join(f"{v:g}" for v in r["bbox"]),
+                ", ".join(h["name"] or h["id"][:8] for h in r["holders"]) or "?",
+                "yes" if r["held"] else "no",
+            )
+            for r in results
+        ],
+    )
+
+
+def register(cli: click.Group) -> None:
+    """Add this module's commands to `cli`."""
+    cli.add_command(query_bbox)
