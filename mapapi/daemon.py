@@ -129,7 +129,7 @@ async def serve(
     stop = stop or asyncio.Event()
     lock = PeerLock.acquire(repo)
     try:
-        peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+        peer = Peer.of(repo)
         ops = Operations(peer)
         ops.on_shutdown = stop.set
         control = ControlServer(ops)

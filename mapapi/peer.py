@@ -75,7 +75,11 @@ class Peer:
     @classmethod
     def open(cls, path: str | Path = ".") -> Peer:
         """The peer of the repository at (or above) `path`."""
-        repo = Repository.find(path)
+        return cls.of(Repository.find(path))
+
+    @classmethod
+    def of(cls, repo: Repository) -> Peer:
+        """The peer of `repo`: its store, identity and spatial index geometry."""
         config = repo.config
         return cls(repo.open_store(), config.peer_id, name=config.name, grid=config.spatial)
 
@@ -385,10 +389,9 @@ class Peer:
             )
         if record is not None:
             # Registered at commit (DESIGN §7): a query right after finds the new box.
-            chunks = sorted({c.chunk_id for c in tx.changes})
-            if self.places.caches(chunks):
+            if self.places.caches(record.chunks):
                 self.places.applied(self.store.commit_revisions(record.id))
-            await self.places.update(chunks)
+            await self.places.update(record.chunks)
         return record
 
     def _refuse_shared(self, tx: Transaction) -> None:

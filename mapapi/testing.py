@@ -14,6 +14,7 @@ import pytest
 
 from mapapi.peer import Peer
 from mapapi.repo import Repository
+from mapapi.spatial import SpatialGrid
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, interval: float = 0.01) -> None:
@@ -35,9 +36,9 @@ def make_repo(tmp_path: Path) -> Callable[..., Repository]:
     """Factory of initialised repositories under the test's temp folder."""
     counter = iter(range(1_000_000))
 
-    def _make(name: str | None = None) -> Repository:
+    def _make(name: str | None = None, spatial: SpatialGrid | None = None) -> Repository:
         index = next(counter)
-        return Repository.init(tmp_path / f"repo{index}", name or f"peer{index}")
+        return Repository.init(tmp_path / f"repo{index}", name or f"peer{index}", spatial)
 
     return _make
 
@@ -49,9 +50,9 @@ async def make_peer(
     """Factory of peers on real SQLite repositories; all are closed after the test."""
     peers: list[Peer] = []
 
-    async def _make(name: str | None = None) -> Peer:
-        repo = make_repo(name)
-        peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+    async def _make(name: str | None = None, spatial: SpatialGrid | None = None) -> Peer:
+        repo = make_repo(name, spatial)
+        peer = Peer.of(repo)
         peers.append(peer)
         return peer
 

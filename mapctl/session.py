@@ -57,7 +57,7 @@ class Session:
                 from mapapi.ops import Operations
                 from mapapi.peer import Peer
 
-                self._peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+                self._peer = Peer.of(repo)
                 self._ops = Operations(self._peer)
         return self._ops
 

@@ -69,7 +69,7 @@ def run_local(commits: int, directory: str | Path | None = None) -> dict[str, An
 
 
 async def _measure_commits_and_reads(repo: Repository, commits: int) -> dict[str, Any]:
-    peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+    peer = Peer.of(repo)
     try:
         await peer.create_table(TABLE, TYPE)
         chunk = await peer.create_chunk(TABLE)

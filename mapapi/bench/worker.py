@@ -218,7 +218,7 @@ async def _stdin_lines() -> asyncio.StreamReader:
 async def serve(args: argparse.Namespace) -> None:
     """Start the peer, announce it, and answer commands until quit or EOF."""
     repo = open_repo(Path(args.repo), args.name or Path(args.repo).name)
-    peer = Peer(repo.open_store(), repo.config.peer_id, name=repo.config.name)
+    peer = Peer.of(repo)
     try:
         address = await peer.start(args.listen, lease=args.lease)
         _say("ready", {"id": str(peer.id), "address": address, "name": peer.name})

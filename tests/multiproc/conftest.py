@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+import pytest
+
+from mapapi import Repository
+from mapapi.daemon import stop_daemon
 
 COMMAND_TIMEOUT = 30.0
 
@@ -34,3 +45,70 @@ def run_mapctl(
         f"mapctl -C {repo.name} {' '.join(args)} exited {done.returncode}: {done.stderr}"
     )
     return done
+
+
+def mapctl(repo: Path, *args: str, view: str = "main", ok: tuple[int, ...] = (0,)) -> str:
+    """Run `mapctl -C repo ARGS`; check its exit code; return its stdout."""
+    return run_mapctl(repo, *args, view=view, ok=ok).stdout
+
+
+def mapctl_json(repo: Path, *args: str, view: str = "main") -> Any:
+    return json.loads(mapctl(repo, *args, "--json", view=view))
+
+
+@dataclass
+class Daemon:
+    """One started peer: its repository and what `peer start --json` printed."""
+
+    repo: Path
+    id: str
+    address: str
+    join: str
+
+
+class Daemons:
+    """Starts peers in fresh repositories; `cleanup()` stops them all, no matter what."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.repos: list[Path] = []
+
+    def start(self, name: str, join: str | None = None) -> Daemon:
+        repo = self.root / name
+        subprocess.run(
+            [MAPCTL, "init", str(repo), "--name", name],
+            check=True,
+            capture_output=True,
+            timeout=COMMAND_TIMEOUT,
+        )
+        self.repos.append(repo)
+        args = ["peer", "start", "--detach", "--json", *(["--join", join] if join else [])]
+        info = json.loads(mapctl(repo, *args))
+        assert set(info) == {"id", "address", "join"}
+        return Daemon(repo, info["id"], info["address"], info["join"])
+
+    def adopt(self, repo: Path) -> None:
+        """Also clean up the daemon of `repo` (say a clone's)."""
+        self.repos.append(repo)
+
+    def cleanup(self) -> None:
+        for path in self.repos:
+            if not (path / ".mapapi").is_dir():
+                continue
+            repo = Repository.find(path)
+            record = repo.running_peer()
+            if record is None:
+                continue
+            try:
+                stop_daemon(repo, timeout=10.0)
+            except Exception:
+                os.kill(record.pid, signal.SIGKILL)
+
+
+@pytest.fixture
+def daemons(tmp_path: Path) -> Iterator[Daemons]:
+    started = Daemons(tmp_path)
+    try:
+        yield started
+    finally:
+        started.cleanup()

@@ -12,92 +12,17 @@ whatever does not stop (DESIGN §9; issue 3 §2).
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
-from collections.abc import Iterator
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import pytest
 
 from mapapi import Repository
-from mapapi.daemon import stop_daemon
 
-from .conftest import COMMAND_TIMEOUT, MAPCTL, run_mapctl
+from .conftest import COMMAND_TIMEOUT, MAPCTL, Daemons, mapctl, mapctl_json
 
 pytestmark = pytest.mark.slow
 
-STRUCT = "google.protobuf.Struct"
 EXIT_CONFLICT = 3
-
-
-def mapctl(repo: Path, *args: str, view: str = "main", ok: tuple[int, ...] = (0,)) -> str:
-    """Run `mapctl -C repo ARGS`; check its exit code; return its stdout."""
-    return run_mapctl(repo, *args, view=view, ok=ok).stdout
-
-
-def mapctl_json(repo: Path, *args: str, view: str = "main") -> Any:
-    return json.loads(mapctl(repo, *args, "--json", view=view))
-
-
-@dataclass
-class Daemon:
-    """One started peer: its repository and what `peer start --json` printed."""
-
-    repo: Path
-    id: str
-    address: str
-    join: str
-
-
-class Daemons:
-    """Starts peers in fresh repositories; `cleanup()` stops them all, no matter what."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = root
-        self.repos: list[Path] = []
-
-    def start(self, name: str, join: str | None = None) -> Daemon:
-        repo = self.root / name
-        subprocess.run(
-            [MAPCTL, "init", str(repo), "--name", name],
-            check=True,
-            capture_output=True,
-            timeout=COMMAND_TIMEOUT,
-        )
-        self.repos.append(repo)
-        args = ["peer", "start", "--detach", "--json", *(["--join", join] if join else [])]
-        info = json.loads(mapctl(repo, *args))
-        assert set(info) == {"id", "address", "join"}
-        return Daemon(repo, info["id"], info["address"], info["join"])
-
-    def adopt(self, repo: Path) -> None:
-        """Also clean up the daemon of `repo` (say a clone's)."""
-        self.repos.append(repo)
-
-    def cleanup(self) -> None:
-        for path in self.repos:
-            if not (path / ".mapapi").is_dir():
-                continue
-            repo = Repository.find(path)
-            record = repo.running_peer()
-            if record is None:
-                continue
-            try:
-                stop_daemon(repo, timeout=10.0)
-            except Exception:
-                os.kill(record.pid, signal.SIGKILL)
-
-
-@pytest.fixture
-def daemons(tmp_path: Path) -> Iterator[Daemons]:
-    started = Daemons(tmp_path)
-    try:
-        yield started
-    finally:
-        started.cleanup()
 
 
 def test_three_daemons_replicate_a_chunk_and_see_each_others_commits(daemons: Daemons) -> None:
@@ -116,7 +41,7 @@ def test_three_daemons_replicate_a_chunk_and_see_each_others_commits(daemons: Da
             assert row["shared_chunks"] == []
 
     # a makes the table and chunk and commits three items through its daemon
-    mapctl(a.repo, "table", "create", "pts", "--type", STRUCT)
+    mapctl(a.repo, "table", "create", "pts", "--type", "google.protobuf.Struct")
     chunk = mapctl(a.repo, "chunk", "create", "pts").strip()
     items = [mapctl_json(a.repo, "set", "pts", json.dumps({"n": n}))["id"] for n in range(3)]
     first = mapctl_json(a.repo, "commit", "-m", "three points")
@@ -197,8 +122,8 @@ def test_three_daemons_replicate_a_chunk_and_see_each_others_commits(daemons: Da
 
 def test_clone_joins_and_participates_in_the_chosen_chunks(daemons: Daemons) -> None:
     a = daemons.start("a")
-    mapctl(a.repo, "table", "create", "pts", "--type", STRUCT)
-    mapctl(a.repo, "table", "create", "poses", "--type", STRUCT)
+    mapctl(a.repo, "table", "create", "pts", "--type", "google.protobuf.Struct")
+    mapctl(a.repo, "table", "create", "poses", "--type", "google.protobuf.Struct")
     pts = mapctl(a.repo, "chunk", "create", "pts").strip()
     poses = mapctl(a.repo, "chunk", "create", "poses").strip()
     mapctl(a.repo, "set", "pts", '{"x": 1}')

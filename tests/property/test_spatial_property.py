@@ -1,12 +1,28 @@
-"""Spatial grid invariants (mapapi.spatial, DESIGN §7): the fast cell arithmetic
-equals brute force over every cell, on random grids, boxes and points."""
+"""Spatial index invariants (DESIGN §7): the fast cell arithmetic of
+`mapapi.spatial` equals brute force over every cell, on random grids, boxes and
+points; and a query of the index over a real Chord ring returns exactly what a
+brute-force filter over every registered box returns."""
 
 from __future__ import annotations
 
+import asyncio
+import itertools
+import random
+import threading
+from collections.abc import Awaitable, Callable, Iterator
+from typing import Any, TypeVar
+
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mapapi.bench.ring import still_ring
+from mapapi.dht.chord import ChordNode
+from mapapi.ids import ChunkId, PeerId
 from mapapi.spatial import BBox, Point, SpatialGrid
+from mapapi.spatial_index import SpatialIndex, SpatialRef
+
+T = TypeVar("T")
 
 EXAMPLES = settings(max_examples=100, deadline=None)
 
@@ -113,3 +129,86 @@ class TestCellKeys:
         again = SpatialGrid.from_config(grid.to_config())
         assert again.config_fingerprint() == grid.config_fingerprint()
         assert [again.cell_key(i, name) for i in range(grid.cell_count)] == keys
+
+
+# -- the index over a real ring ------------------------------------------------------
+
+RING_GRID = SpatialGrid(BBox(-100, -100, -10, 100, 100, 10), (8, 8, 2))
+TABLES = ("rooms", "clouds")
+
+Run = Callable[[Awaitable[T]], T]
+
+
+@pytest.fixture(scope="module")
+def ring() -> Iterator[tuple[Run[Any], list[ChordNode]]]:
+    """A still ring of 4 nodes on an event loop in a thread of its own, so that
+    hypothesis (synchronous) can drive it example after example."""
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, name="ring loop", daemon=True)
+    thread.start()
+
+    def run(coro: Awaitable[T]) -> T:
+        return asyncio.run_coroutine_threadsafe(coro, loop).result(timeout=60)  # type: ignore[arg-type]
+
+    nodes_cm = still_ring(4, random.Random(11))
+    nodes = run(nodes_cm.__aenter__())
+    try:
+        yield run, nodes
+    finally:
+        run(nodes_cm.__aexit__(None, None, None))
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout=10)
+        loop.close()
+
+
+@st.composite
+def refs(draw: st.DrawFn) -> SpatialRef:
+    rng = random.Random(draw(st.integers(0, 2**32)))
+    return SpatialRef(
+        ChunkId(f"{rng.getrandbits(128):032x}"),
+        draw(st.sampled_from(TABLES)),
+        draw(boxes(RING_GRID)),
+        holders=((PeerId(f"{rng.getrandbits(128):032x}"), "tcp://127.0.0.1:1"),),
+    )
+
+
+_index_names = (f"example-{n}" for n in itertools.count())
+
+
+class TestIndexOverTheRing:
+    @settings(max_examples=40, deadline=None)
+    @given(
+        registered=st.lists(refs(), max_size=10, unique_by=lambda r: r.chunk),
+        query=boxes(RING_GRID),
+        table=st.sampled_from((None, *TABLES)),
+        exact_at_owner=st.booleans(),
+        data=st.data(),
+    )
+    def test_query_equals_a_brute_force_filter(
+        self,
+        ring: tuple[Run[Any], list[ChordNode]],
+        registered: list[SpatialRef],
+        query: BBox,
+        table: str | None,
+        exact_at_owner: bool,
+        data: st.DataObject,
+    ) -> None:
+        run, nodes = ring
+        name = next(_index_names)  # a fresh index: no entry of an earlier example
+        indexes = [SpatialIndex(node, RING_GRID, name) for node in nodes]
+        for ref in registered:
+            run(data.draw(st.sampled_from(indexes)).register(ref, ttl=600))
+        asker = data.draw(st.sampled_from(indexes))
+
+        found = run(asker.query(query, table, exact_at_owner=exact_at_owner))
+
+        inside = RING_GRID.clamp(query) is not None
+        expected = [
+            r
+            for r in registered
+            if inside
+            and RING_GRID.clamp(r.bbox) is not None
+            and r.bbox.overlaps(query)
+            and table in (None, r.table)
+        ]
+        assert found == sorted(expected, key=lambda r: r.chunk)

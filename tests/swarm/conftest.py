@@ -14,6 +14,8 @@ import pytest
 
 from mapapi import ChunkId, ConflictError, ItemId, LockTimeout, Peer
 from mapapi._pb.mapapi.v1.types_pb2 import Account, Counter
+from mapapi.dht.ring import SortedRing
+from mapapi.swarm import ChordOptions
 from mapapi.swarm import Swarm as PeerSwarm
 
 TABLE = "counters"
@@ -107,3 +109,42 @@ async def log_ids(peer: Peer) -> list[str]:
     for chunk in peer.chunks():
         await net(peer).locks.wait_readable(chunk.id)
     return [str(c.id) for c in peer.log()]
+
+
+# -- swarms on a settled Chord ring (lookup tests) ----------------------------------
+
+FAST = ChordOptions(
+    stabilize=0.02, fix_fingers=0.1, check_predecessor=0.05, timeout=1.0, holder_ttl=5.0
+)
+MAX_ROUNDS = 1_000
+
+MakePeer = Callable[..., Awaitable[Peer]]
+
+
+def _ring_correct(peers: list[Peer]) -> bool:
+    nodes = [net(p).chord for p in peers]
+    oracle = SortedRing(n.key for n in nodes)
+    for node in nodes:
+        want = oracle.successor_list(node.key, FAST.successors)
+        if [s.key for s in node.successors] != want:
+            return False
+        if len(nodes) > 1 and (
+            node.predecessor is None or node.predecessor.key != oracle.predecessor(node.key)
+        ):
+            return False
+    return True
+
+
+async def lookup_swarm(make_peer: MakePeer, n: int, **options: object) -> list[Peer]:
+    """n started peers joined through the first, once their ring is correct
+    (`options` go to `make_peer`)."""
+    peers = [await make_peer(**options) for _ in range(n)]
+    for peer in peers:
+        await peer.start("tcp://127.0.0.1:0", chord=FAST)
+    for peer in peers[1:]:
+        await peer.join(peers[0].address)
+    for _ in range(MAX_ROUNDS):
+        if _ring_correct(peers):
+            return peers
+        await net(peers[0]).chord.next_round()
+    raise AssertionError(f"the ring of {n} peers did not settle in {MAX_ROUNDS} rounds")

@@ -8,50 +8,12 @@ every registration lands at the key's real owner.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
-
 from mapapi import ChunkId, Peer
-from mapapi.dht.ring import SortedRing, chunk_key
+from mapapi.dht.ring import chunk_key
 from mapapi.ops import Operations
 from mapapi.replication import decode_holder
-from mapapi.swarm import ChordOptions
 
-from .conftest import TABLE, counter_chunk, net, value
-
-FAST = ChordOptions(
-    stabilize=0.02, fix_fingers=0.1, check_predecessor=0.05, timeout=1.0, holder_ttl=5.0
-)
-MAX_ROUNDS = 1_000
-
-MakePeer = Callable[..., Awaitable[Peer]]
-
-
-def _ring_correct(peers: list[Peer]) -> bool:
-    nodes = [net(p).chord for p in peers]
-    oracle = SortedRing(n.key for n in nodes)
-    for node in nodes:
-        want = oracle.successor_list(node.key, FAST.successors)
-        if [s.key for s in node.successors] != want:
-            return False
-        if len(nodes) > 1 and (
-            node.predecessor is None or node.predecessor.key != oracle.predecessor(node.key)
-        ):
-            return False
-    return True
-
-
-async def lookup_swarm(make_peer: MakePeer, n: int) -> list[Peer]:
-    """n started peers joined through the first, once their ring is correct."""
-    peers = [await make_peer() for _ in range(n)]
-    for peer in peers:
-        await peer.start("tcp://127.0.0.1:0", chord=FAST)
-    for peer in peers[1:]:
-        await peer.join(peers[0].address)
-    for _ in range(MAX_ROUNDS):
-        if _ring_correct(peers):
-            return peers
-        await net(peers[0]).chord.next_round()
-    raise AssertionError(f"the ring of {n} peers did not settle in {MAX_ROUNDS} rounds")
+from .conftest import TABLE, MakePeer, counter_chunk, lookup_swarm, net, value
 
 
 async def indexed_holders(asker: Peer, chunk: ChunkId) -> set[str]:
