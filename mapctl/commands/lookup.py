@@ -38,15 +38,14 @@ def query_bbox(
     from mapctl.commands.peer import participate_with_progress
 
     info: dict[str, Any] = session.call("query_bbox", bbox=list(bbox), table=table)
+    missing = [r["chunk"] for r in info["results"] if not r["held"]] if load else []
+    for number, chunk in enumerate(missing, 1):
+        if not as_json:
+            render.note(f"loading {number}/{len(missing)}: chunk {chunk}")
+        participate_with_progress(session, chunk)
+    if missing:  # list them as held now, with every holder
+        info = session.call("query_bbox", bbox=list(bbox), table=table)
     results = info["results"]
-    if load:
-        missing = [r for r in results if not r["held"]]
-        for number, result in enumerate(missing, 1):
-            if not as_json:
-                render.note(f"loading {number}/{len(missing)}: chunk {result['chunk']}")
-            loaded = participate_with_progress(session, result["chunk"])
-            result["held"] = True
-            result["holders"] = [{"id": p, "name": "", "address": ""} for p in loaded["holders"]]
     if as_json:
         render.emit_json(info)
         return
