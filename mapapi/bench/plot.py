@@ -92,6 +92,11 @@ def _finish(
     handles = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
     labels = ax.get_legend_handles_labels()[1] + twin.get_legend_handles_labels()[1]
     ax.legend(handles, labels, loc=legend, fontsize=8, framealpha=0.9)
+    _save(fig, rows, output)
+
+
+def _save(fig: Any, rows: Sequence[dict[str, Any]], output: str | Path) -> None:
+    """The caption under the panels, then the file."""
     fig.text(0.01, 0.01, _caption(rows), fontsize=7, color="dimgray")
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     fig.savefig(output)
@@ -137,6 +142,15 @@ def _frame(ax: Any, xlabel: str, ylabel: str, rows: Sequence[dict[str, Any]], x:
     ax.set_xticks(sorted({int(r[x]) for r in rows}))
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
+
+
+def _log2_x(ax: Any) -> None:
+    """A log2 x axis labelled with the measured values themselves."""
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    ax.set_xscale("log", base=2)
+    ax.xaxis.set_major_formatter(ScalarFormatter())  # 8, 16, ... rather than 2^3, 2^4, ...
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def _right_axis(ax: Any, points: Any, label: str, color: str) -> Any:
@@ -198,8 +212,6 @@ def plot_lookup(
         environment: the caption's machine, Python and load when `rows` lack
             them (`mapapi.bench.lookup.environment()`, taken before the runs).
     """
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
-
     plt = _pyplot()
     rows = [{**(environment or {}), **row} for row in rows]
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
@@ -211,9 +223,7 @@ def plot_lookup(
     _frame(
         ax, "Chord nodes N (log scale; all in one process and event loop)", "hops", rows, "peers"
     )
-    ax.set_xscale("log", base=2)
-    ax.xaxis.set_major_formatter(ScalarFormatter())  # 8, 16, ... rather than 2^3, 2^4, ...
-    ax.xaxis.set_minor_formatter(NullFormatter())
+    _log2_x(ax)
     latency = _right_axis(ax, _by(rows, "peers", "p50_ms"), "p50 latency, ms", "grey")
     _series(
         latency,
@@ -231,4 +241,70 @@ def plot_lookup(
         axis.set_ylim(0, 1.5 * axis.get_ylim()[1])
     ax.set_title("Chord lookups (mapctl bench lookup): hops and latency against N", fontsize=10)
     _finish(fig, ax, latency, rows, output)
+    plt.close(fig)
+
+
+_LATENCY_COLORS = ("tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:brown")
+_DATASET_STYLES = (
+    {"ls": "-", "marker": "o"},
+    {"ls": "--", "marker": "s"},
+    {"ls": ":", "marker": "^"},
+)
+
+
+def plot_spatial(
+    rows: Sequence[dict[str, Any]],
+    output: str | Path,
+    environment: dict[str, Any] | None = None,
+) -> None:
+    """Spatial-index query cost against grid cells, as the Map API paper's Fig. 8
+    (`mapctl bench spatial --plot`): three log-log panels, query time per added
+    latency, Chord requests per query, and entries returned per query with and
+    without exact filtering at the cell owners (with the missions found).
+
+    Args:
+        rows: `bench spatial --json` objects; a line style per data set.
+        output: the PNG to write.
+        environment: the caption's machine, Python and load when `rows` lack
+            them (`mapapi.bench.lookup.environment()`, taken before the runs).
+    """
+    plt = _pyplot()
+    rows = [{**(environment or {}), **row} for row in rows]
+    datasets = list(dict.fromkeys(r["dataset"] for r in rows))
+    latencies = sorted({float(r["latency_ms"]) for r in rows})
+    fig, (times, requests, entries) = plt.subplots(1, 3, figsize=(15, 4.8), dpi=120)
+    for dataset, style in zip(datasets, _DATASET_STYLES, strict=False):
+        mine = [r for r in rows if r["dataset"] == dataset]
+        for latency, color in zip(latencies, _LATENCY_COLORS, strict=False):
+            at = [r for r in mine if float(r["latency_ms"]) == latency]
+            label = f"{dataset}, +{latency:g} ms one-way link latency"
+            _series(times, _by(at, "cells", "query_ms"), label, color=color, **style)
+        # requests and entries do not depend on the latency: its rows' points coincide
+        for ax, key, label, color in (
+            (requests, "requests", "requests", "tab:blue"),
+            (requests, "cells_asked", "cells asked", "grey"),
+            (entries, "returned_all", "without filtering", "tab:red"),
+            (entries, "returned_exact", "exact filtering at the owner", "tab:green"),
+            (entries, "matches", "missions found", "black"),
+        ):
+            _series(ax, _by(mine, "cells", key), f"{dataset}: {label}", color=color, **style)
+    cells = "grid cells (n x n, log scale)"
+    for ax, ylabel, title in (
+        (times, "query time, ms (exact filtering)", "query time"),
+        (requests, "per query", "Chord requests sent by the asker, cells asked"),
+        (entries, "entries per query", "entries travelling back from the asked cells"),
+    ):
+        _frame(ax, cells, ylabel, rows, "cells")
+        _log2_x(ax)
+        ax.set_yscale("log")
+        ax.autoscale(axis="y")
+        bottom, top = ax.get_ylim()
+        ax.set_ylim(bottom, 10 * top)  # a decade of headroom: the legend sits above the data
+        ax.set_title(title, fontsize=10)
+        ax.legend(loc="upper left", fontsize=7, framealpha=0.9)
+    fig.suptitle(
+        "Spatial index (mapctl bench spatial): query cost against grid cells, cf. paper Fig. 8",
+        fontsize=11,
+    )
+    _save(fig, rows, output)
     plt.close(fig)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import click
@@ -120,6 +121,25 @@ def bench_commit(
     _render(f"bench commit: {holders} holders", result, as_json)
 
 
+def _repeatable(flag: str, dest: str, kind: click.ParamType, text: str) -> Any:
+    """An option that may be given several times (`dest` collects a tuple)."""
+    return click.option(flag, flag[1:3], dest, multiple=True, type=kind, help=text)
+
+
+def _plot_option(what: str) -> Any:
+    """`--plot FILE`: also write a PNG of `what`."""
+    return click.option(
+        "--plot", type=click.Path(dir_okay=False), help=f"Also write a PNG of {what} (matplotlib)."
+    )
+
+
+def _per_run(flag: str, default: int, text: str) -> Any:
+    """`-n`: how many timed operations a run makes."""
+    return click.option(
+        flag, "-n", default=default, show_default=True, type=click.IntRange(1), help=text
+    )
+
+
 @bench.command("lookup")
 @click.option(
     "--peers",
@@ -130,23 +150,11 @@ def bench_commit(
     help="Chord nodes on the ring (repeat for several rings; default 32).",
 )
 @click.option("--sweep", is_flag=True, help="Also run N = 8, 16, 32, 64 and 128.")
-@click.option(
-    "--lookups",
-    "-n",
-    default=1000,
-    show_default=True,
-    type=click.IntRange(1),
-    help="Timed lookups per ring, each from a random node.",
-)
+@_per_run("--lookups", 1000, "Timed lookups per ring, each from a random node.")
 @click.option(
     "--seed", default=0, show_default=True, help="Seeds node ids, joins and keys (hops repeat)."
 )
-@click.option(
-    "--plot",
-    "plot",
-    type=click.Path(dir_okay=False),
-    help="Also write a PNG of hops and latency against N (needs matplotlib).",
-)
+@_plot_option("hops and latency against N")
 @json_option
 def bench_lookup(
     peers: tuple[int, ...],
@@ -175,6 +183,89 @@ def bench_lookup(
         from mapapi.bench.plot import plot_lookup
 
         plot_lookup(results, plot, machine)
+
+
+@bench.command("spatial")
+@_repeatable(
+    "--dataset",
+    "datasets",
+    click.Choice(["parking-garage", "tunnels"]),
+    "Real missions to index (repeat for several; default both).",
+)
+@_repeatable(
+    "--cells", "cells", click.IntRange(1), "Grid cells, n x n (repeat; default 1, 4, ..., 4096)."
+)
+@_repeatable(
+    "--latency",
+    "latencies",
+    click.FloatRange(0),
+    "Added one-way link latency in ms (repeat; default 0, 5, 20).",
+)
+@click.option(
+    "--peers", "-p", default=16, show_default=True, type=click.IntRange(1, 256), help="Chord nodes."
+)
+@_per_run("--queries", 20, "Query boxes per row, each asked from a random node.")
+@click.option(
+    "--fraction",
+    default=0.1,
+    show_default=True,
+    type=click.FloatRange(0, 1, min_open=True),
+    help="A query box's side as a fraction of the map's horizontal extent.",
+)
+@click.option(
+    "--seed", default=0, show_default=True, help="Seeds node ids, holders, boxes and askers."
+)
+@click.option(
+    "--samples",
+    type=click.Path(file_okay=False, exists=True, path_type=Path),
+    help="The sample_maps folder (default: the one of this source tree).",
+)
+@_plot_option("time, requests and entries against cells")
+@json_option
+def bench_spatial(
+    datasets: tuple[str, ...],
+    cells: tuple[int, ...],
+    latencies: tuple[float, ...],
+    peers: int,
+    queries: int,
+    fraction: float,
+    seed: int,
+    samples: Path | None,
+    plot: str | None,
+    as_json: bool,
+) -> None:
+    """Spatial-index query cost against grid cells (Map API paper, Fig. 8).
+
+    Real missions (parking-garage segments, tunnels robots) are registered on
+    a ring of N nodes in this process; random boxes are then queried with the
+    exact filter at each cell's owner and without it. Both modes must find the
+    same missions, or the command fails (exit 1). With --json, one object per
+    (dataset, cells, latency), one per line.
+    """
+    from mapapi.bench import spatial
+    from mapapi.bench.lookup import environment
+
+    machine = environment()  # before the runs, whose own load would count otherwise
+    rows = []
+    for dataset in datasets or spatial.DATASETS:
+        for row in spatial.measure_spatial(
+            dataset,
+            cells=cells or spatial.CELLS,
+            latencies_ms=latencies or spatial.LATENCIES_MS,
+            peers=peers,
+            queries=queries,
+            seed=seed,
+            fraction=fraction,
+            samples=samples or spatial.SAMPLES,
+        ):
+            title = f"bench spatial: {dataset}, {row['cells']} cells, {row['latency_ms']:g} ms"
+            _render(title, row, as_json)
+            rows.append(row)
+    spatial.check_spatial(rows)
+    if plot:
+        from mapapi.bench.plot import plot_spatial
+
+        plot_spatial(rows, plot, machine)
 
 
 @bench.command("plot")

@@ -1,0 +1,120 @@
+"""`mapctl bench spatial` on tiny grids: the promised figures, and the missions
+found equal a brute-force overlap count over the same missions and boxes
+(times are reported, never asserted)."""
+
+from __future__ import annotations
+
+import json
+import statistics
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from mapapi.bench.spatial import (
+    SpatialCheckFailed,
+    check_spatial,
+    grid_for,
+    load_dataset,
+    measure_spatial,
+    query_boxes,
+)
+from mapapi.errors import UsageError
+from mapapi.spatial import BBox
+from mapctl.cli import cli
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
+KEYS = {
+    "dataset",
+    "cells",
+    "latency_ms",
+    "peers",
+    "missions",
+    "queries",
+    "cells_asked",
+    "query_ms",
+    "query_ms_all",
+    "requests",
+    "returned_exact",
+    "returned_all",
+    "matches",
+    "mismatches",
+}
+
+
+def brute_force_matches(dataset: str, boxes: list[BBox]) -> float:
+    """Missions whose box overlaps each query box, on average: the oracle."""
+    missions = load_dataset(dataset, SAMPLES).missions.values()
+    return statistics.fmean(sum(mission.overlaps(box) for mission in missions) for box in boxes)
+
+
+def check_rows(rows: list[dict[str, Any]], dataset: str, cells: list[int], queries: int) -> None:
+    """One row per cell count in order, the promised keys, and matches as brute force."""
+    boxes = query_boxes(load_dataset(dataset, SAMPLES), queries, seed=3)
+    expected = brute_force_matches(dataset, boxes)
+    assert [row["cells"] for row in rows] == cells
+    for row in rows:
+        assert set(row) == KEYS
+        assert (row["dataset"], row["latency_ms"], row["queries"]) == (dataset, 0, queries)
+        assert row["matches"] == pytest.approx(expected, abs=1e-3)
+        assert row["matches"] <= row["returned_exact"] <= row["returned_all"]
+        assert 1 <= row["cells_asked"] <= row["cells"]
+    first = rows[0]  # one cell holds every mission: all of them travel without filtering
+    assert first["returned_all"] == first["missions"]
+    assert first["returned_exact"] == first["matches"]
+
+
+class TestGeometry:
+    def test_the_vertical_axis_of_each_data_set_stays_undivided(self) -> None:
+        assert grid_for(load_dataset("parking-garage", SAMPLES), 16).cells == (4, 4, 1)
+        assert grid_for(load_dataset("tunnels", SAMPLES), 16).cells == (4, 1, 4)  # y down
+
+    def test_missions_are_robots_or_garage_segments(self) -> None:
+        assert len(load_dataset("tunnels", SAMPLES).missions) == 8
+        assert len(load_dataset("parking-garage", SAMPLES).missions) == 17  # 1,661 / 100
+
+    def test_a_grid_that_is_not_square_is_refused(self) -> None:
+        with pytest.raises(UsageError, match="not n x n"):
+            grid_for(load_dataset("tunnels", SAMPLES), 8)
+
+    def test_query_boxes_are_seeded_and_inside_the_extent(self) -> None:
+        dataset = load_dataset("tunnels", SAMPLES)
+        boxes = query_boxes(dataset, 5, seed=1)
+        assert boxes == query_boxes(dataset, 5, seed=1)
+        assert all(dataset.extent.intersection(box) == box for box in boxes)
+
+
+class TestMeasureSpatial:
+    def test_matches_equal_a_brute_force_count(self) -> None:
+        rows = measure_spatial(
+            "tunnels", cells=(1, 4, 16), latencies_ms=(0,), peers=4, queries=2, seed=3
+        )
+        check_rows(rows, "tunnels", [1, 4, 16], 2)
+
+    def test_a_mismatch_between_the_modes_fails_the_check(self) -> None:
+        row = {"dataset": "tunnels", "cells": 4, "latency_ms": 0.0, "mismatches": 1}
+        check_spatial([{**row, "mismatches": 0}])
+        with pytest.raises(SpatialCheckFailed, match="tunnels 4 cells"):
+            check_spatial([row])
+
+
+class TestCommand:
+    def test_json_prints_one_object_per_row_and_the_plot(self, tmp_path: Path) -> None:
+        pytest.importorskip("matplotlib")
+        png = tmp_path / "spatial.png"
+        args = ["bench", "spatial", "-d", "parking-garage", "-c", "1", "-c", "16", "-l", "0"]
+        args += ["-n", "2", "-p", "4", "--seed", "3", "--json", "--plot", str(png)]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        rows = [json.loads(line) for line in result.output.splitlines()]
+        check_rows(rows, "parking-garage", [1, 16], 2)
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    def test_without_json_a_table_names_the_figures(self) -> None:
+        args = ["bench", "spatial", "-d", "tunnels", "-c", "4", "-l", "0", "-n", "2", "-p", "4"]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        assert "bench spatial: tunnels, 4 cells, 0 ms" in result.output
+        for key in KEYS - {"dataset", "cells", "latency_ms"}:
+            assert key in result.output, key
