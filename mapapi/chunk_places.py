@@ -89,7 +89,7 @@ class ChunkPlaces:
             type_name = self._placed_type(revs[0].table)
             if type_name is None:
                 continue
-            if any(r.removed or r.insert_time != r.update_time for r in revs):
+            if any(r.kind != "inserted" for r in revs):
                 self._loose.add(chunk)
             self._refs[chunk] = _grow(self._refs[chunk], chunk, revs[0].table, type_name, revs)
 

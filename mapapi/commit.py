@@ -29,6 +29,8 @@ from mapapi.transaction import (
 )
 
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
+    from collections.abc import Awaitable, Callable
+
     from mapapi.lock_client import LockService
     from mapapi.replication import Replicator
 
@@ -148,8 +150,11 @@ async def commit_distributed(
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
+    after: Callable[[CommitRecord, list[Revision]], Awaitable[None]] | None = None,
 ) -> CommitRecord | None:
-    """Commit `tx` across every holder of the chunks it touches.
+    """Commit `tx` across every holder of the chunks it touches; `after` runs once
+    the commit is applied everywhere, while this peer still holds its own locks
+    (so the next commit to those chunks waits for it; it must not raise).
 
     Raises:
         ConflictError: as on one peer; every lock is released, nothing written.
@@ -181,6 +186,8 @@ async def commit_distributed(
                     f"every holder, so it was refused and nothing was written; retry ({exc})"
                 ) from exc
             pushed = True
+            if after is not None:
+                await after(record, decision.revisions)
     finally:
         if decision.record is not None and not pushed:
             await replicator.abort(held, decision.record.id)

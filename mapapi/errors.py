@@ -206,6 +206,13 @@ class QueryError(MapError):
     exit_code = 2
 
 
+class WatchTimeout(QueryError):
+    """`mapctl watch --timeout` ran out before the changes it waited for arrived."""
+
+    code = 62
+    exit_code = 1
+
+
 class InvalidBBox(QueryError, ValueError):
     """A bounding box is malformed: min > max, or a coordinate is NaN or infinite."""
 

@@ -30,6 +30,14 @@ class Revision:
     author: PeerId
     commit_id: CommitId
 
+    @property
+    def kind(self) -> str:
+        """What this revision did to its item: 'inserted' (it is the item's first
+        revision), 'updated' or 'removed'."""
+        if self.removed:
+            return "removed"
+        return "inserted" if self.insert_time == self.update_time else "updated"
+
 
 @dataclass(frozen=True, slots=True)
 class CommitRecord:

@@ -27,6 +27,7 @@ from mapapi.store import ChunkInfo, MemoryStore
 from mapapi.store.base import ReplicaStore
 from mapapi.table import TableDescriptor
 from mapapi.transaction import Change, Isolation, Transaction
+from mapapi.triggers import Callback, Triggers
 
 if TYPE_CHECKING:
     from google.protobuf.message import Message
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     from mapapi.net.messages import ChunkSummary, Member
     from mapapi.net.shaping import Shaper
     from mapapi.replication import Progress
+    from mapapi.subscriptions import Subscription, SubscriptionSpec
     from mapapi.swarm import ChordOptions, Swarm
 
 log = logging.getLogger(__name__)
@@ -67,6 +69,7 @@ class Peer:
         self.name = name or self.id.short
         self.grid = grid or SpatialGrid()
         self.places = ChunkPlaces(store)
+        self.triggers = Triggers()
         self.clock = LamportClock(store.clock())
         self.swarm: Swarm | None = None
         self._descriptors: dict[str, TableDescriptor] = {}
@@ -104,6 +107,7 @@ class Peer:
             await self.swarm.leave()
             await self.swarm.close()
             self.swarm = None
+        await self.triggers.close()
         self.store.close()
 
     # -- the swarm -----------------------------------------------------------------
@@ -141,6 +145,7 @@ class Peer:
             grid=self.grid,
         )
         address = await swarm.start(listen)
+        swarm.replicator.applied_hooks.append(self.triggers.applied)
         self.swarm = swarm
         return address
 
@@ -374,11 +379,8 @@ class Peer:
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply a transaction (see `mapapi.commit`)."""
-        if self.swarm is None:
-            self._refuse_shared(tx)
-            record = commit_locally(self.store, tx, message, self.clock, self._try_merge)
-        else:
-            record = await commit_distributed(
+        if self.swarm is not None:
+            return await commit_distributed(
                 self.store,
                 self.swarm.locks,
                 self.swarm.replicator,
@@ -386,13 +388,25 @@ class Peer:
                 message,
                 self.clock,
                 self._try_merge,
+                after=self._committed,
             )
+        self._refuse_shared(tx)
+        record = commit_locally(self.store, tx, message, self.clock, self._try_merge)
         if record is not None:
-            # Registered at commit (DESIGN §7): a query right after finds the new box.
-            if self.places.caches(record.chunks):
-                self.places.applied(self.store.commit_revisions(record.id))
-            await self.places.update(record.chunks)
+            await self._committed(record, self.store.commit_revisions(record.id))
         return record
+
+    async def _committed(self, record: CommitRecord, revisions: list[Revision]) -> None:
+        """What follows a commit of this peer, applied everywhere and (in a swarm)
+        still under its locks: the chunks' boxes are announced (DESIGN §7: a
+        query right after finds them), local triggers queued and remote
+        subscribers told (DESIGN §8)."""
+        if self.places.caches(record.chunks):
+            self.places.applied(revisions)
+        await self.places.update(record.chunks)
+        self.triggers.applied(record, revisions)
+        if self.swarm is not None:
+            await self.swarm.subscriptions.notify(record, revisions)
 
     def _refuse_shared(self, tx: Transaction) -> None:
         """Alone, a commit may not touch a chunk other peers hold: they would never
@@ -415,6 +429,38 @@ class Peer:
             descriptor.decode(theirs.data),
         )
         return None if merged is None else descriptor.encode(merged)
+
+    # -- triggers (DESIGN §8) ------------------------------------------------------
+    def on_commit(
+        self, callback: Callback, *, chunk: ChunkId | None = None, table: str | None = None
+    ) -> int:
+        """Call `callback(event)` once for every commit applied here from now on
+        (this peer's and others') that touches `chunk`, or `table`, or anything;
+        in commit order, off the receive loop (see `mapapi.triggers`). Returns
+        the trigger's id for `remove_trigger`."""
+        if table is not None:
+            self.table(table)
+        if chunk is not None:
+            self.chunk_table(chunk)
+        return self.triggers.add(callback, chunk=chunk, table=table)
+
+    def remove_trigger(self, trigger_id: int) -> bool:
+        """Stop a trigger; returns whether it existed."""
+        return self.triggers.remove(trigger_id)
+
+    async def subscribe(self, spec: SubscriptionSpec) -> Subscription:
+        """Hear about every commit, by any peer, that changes an item inside
+        `spec`'s region (of its table, matching its filters): the matching
+        revisions arrive in the subscription's `events` (DESIGN §8).
+
+        Raises:
+            UsageError: not on the network, or a region outside the index.
+        """
+        return await self._on_swarm().subscriptions.subscribe(spec)
+
+    async def unsubscribe(self, subscription: Subscription) -> bool:
+        """Cancel a subscription; returns whether it was active."""
+        return await self._on_swarm().subscriptions.cancel(subscription.id)
 
     # -- history -------------------------------------------------------------
     def log(self, limit: int | None = None) -> list[CommitRecord]:

@@ -102,6 +102,8 @@ class Replicator:
         self.holder_ttl = holder_ttl
         self.announced = Announcements(self._holder_entries, holder_ttl, "holder")
         self.places: ChunkPlaces | None = None  # the chunks' boxes, kept current if set
+        # called with each commit another peer applies here, in apply order
+        self.applied_hooks: list[Callable[[CommitRecord, list[Revision]], None]] = []
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
             (CommitApply, self.rpc_commit_apply),
@@ -156,6 +158,8 @@ class Replicator:
         self.store.apply_commit(record, revisions)
         if self.places is not None:
             self.places.applied(revisions)
+        for hook in self.applied_hooks:
+            hook(record, revisions)
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 

@@ -67,7 +67,7 @@ class SpatialRef:
         entry = lookup_pb2.SpatialEntry(
             chunk=self.chunk.to_bytes(),
             table=self.table,
-            bbox=_box3(self.bbox),
+            bbox=box3(self.bbox),
             missions=sorted(self.missions)[:_MAX_MISSIONS],
             holder=holder.to_bytes(),
             address=address,
@@ -88,22 +88,32 @@ class SpatialRef:
             raise ValueError(f"not a spatial entry: {exc}") from exc
         if len(entry.chunk) != 16 or len(entry.holder) != 16 or not entry.HasField("bbox"):
             raise ValueError("a spatial entry needs 16-byte chunk and holder ids and a box")
-        b = entry.bbox
-        box = BBox(b.xmin, b.ymin, b.zmin, b.xmax, b.ymax, b.zmax)  # InvalidBBox is a ValueError
+        box = box_of(entry.bbox)
         holder = (PeerId.from_bytes(entry.holder), entry.address)
         chunk = ChunkId.from_bytes(entry.chunk)
         return cls(chunk, entry.table, box, tuple(entry.missions), (holder,))
 
 
-def _box3(box: BBox) -> maps_pb2.Box3:
+def box3(box: BBox) -> maps_pb2.Box3:
+    """`box` as a `mapapi.v1.Box3` message."""
     return maps_pb2.Box3(
         xmin=box.xmin, ymin=box.ymin, zmin=box.zmin, xmax=box.xmax, ymax=box.ymax, zmax=box.zmax
     )
 
 
+def box_of(message: maps_pb2.Box3) -> BBox:
+    """The box of a `mapapi.v1.Box3` message.
+
+    Raises:
+        InvalidBBox: a malformed box (it is a ValueError).
+    """
+    b = message
+    return BBox(b.xmin, b.ymin, b.zmin, b.xmax, b.ymax, b.zmax)
+
+
 def encode_filter(box: BBox, table: str | None = None) -> bytes:
     """The argument of the "bbox" filter."""
-    spec = lookup_pb2.SpatialFilter(bbox=_box3(box), table=table or "")
+    spec = lookup_pb2.SpatialFilter(bbox=box3(box), table=table or "")
     return bytes(spec.SerializeToString(deterministic=True))
 
 
@@ -122,8 +132,7 @@ def bbox_filter(argument: bytes) -> Callable[[bytes], bool]:
         raise ValueError(f"not a spatial filter: {exc}") from exc
     if not spec.HasField("bbox"):
         raise ValueError("a spatial filter needs a box")
-    b = spec.bbox
-    box = BBox(b.xmin, b.ymin, b.zmin, b.xmax, b.ymax, b.zmax)
+    box = box_of(spec.bbox)
     table = spec.table
 
     def keep(member: bytes) -> bool:
@@ -210,40 +219,57 @@ class SpatialIndex:
                 could not be reached are missing otherwise, logged and counted
                 in `stats.failed_cells`).
         """
+        argument = encode_filter(box, table)
+        keep = bbox_filter(argument)
+        found: dict[ChunkId, SpatialRef] = {}
+        filter, sent = (FILTER, argument) if exact_at_owner else ("", b"")
+        for member in await self.members(box, filter, sent, stats):
+            if keep(member):
+                ref = SpatialRef.decode(member)
+                found[ref.chunk] = _merge(found.get(ref.chunk), ref)
+        return [found[c] for c in sorted(found)]
+
+    async def members(
+        self,
+        box: BBox,
+        filter: str = "",
+        argument: bytes = b"",
+        stats: QueryStats | None = None,
+    ) -> list[bytes]:
+        """Every member of every cell `box` overlaps, as each cell's owner's
+        `filter` keeps them for `argument` (a member in several cells comes
+        once per cell).
+
+        Raises:
+            QueryError: no cell owner answered at all (members of cells that
+                could not be reached are missing otherwise, logged and counted
+                in `stats.failed_cells`).
+        """
         stats = stats if stats is not None else QueryStats()
         cells = self.grid.cells_overlapping(box)
         stats.cells = len(cells)
-        argument = encode_filter(box, table)
-        keep = bbox_filter(argument)
         gate = asyncio.Semaphore(_PARALLEL)
 
         async def ask(cell: int) -> set[bytes]:
-            key = self.grid.cell_key(cell, self.name)
             async with gate:
-                if exact_at_owner:
-                    return await self.chord.get(key, FILTER, argument)
-                return await self.chord.get(key)
+                return await self.chord.get(self.grid.cell_key(cell, self.name), filter, argument)
 
         before = self.chord.requests_sent
         answers = await asyncio.gather(*(ask(c) for c in cells), return_exceptions=True)
         stats.requests += self.chord.requests_sent - before
-        found: dict[ChunkId, SpatialRef] = {}
+        members: list[bytes] = []
         for cell, answer in zip(cells, answers, strict=True):
             if isinstance(answer, BaseException):
                 if not isinstance(answer, MapError):
                     raise answer
-                log.warning("cell %d of the spatial index did not answer: %s", cell, answer)
+                log.warning("cell %d of index %r did not answer: %s", cell, self.name, answer)
                 stats.failed_cells.append(cell)
                 continue
             stats.transferred += len(answer)
-            for member in answer:
-                if not keep(member):
-                    continue
-                ref = SpatialRef.decode(member)
-                found[ref.chunk] = _merge(found.get(ref.chunk), ref)
+            members.extend(answer)
         if cells and len(stats.failed_cells) == len(cells):
             raise QueryError(f"no owner of the {len(cells)} cells of {box} answered")
-        return [found[c] for c in sorted(found)]
+        return members
 
 
 def _merge(old: SpatialRef | None, new: SpatialRef) -> SpatialRef:

@@ -31,6 +31,7 @@ from mapapi.replication import HOLDER_TTL, Replicator
 from mapapi.spatial import SpatialGrid
 from mapapi.spatial_index import SpatialIndex
 from mapapi.store.base import ReplicaStore
+from mapapi.subscriptions import Subscriptions
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +89,9 @@ class Swarm:
             holder_ttl=self.chord_options.holder_ttl,
         )
         self._chord: ChordNode | None = None  # made by `start()`: it needs the address
+        self.subscriptions = Subscriptions(
+            self.rpc, lambda: self.members.me, store, self.chord_options.holder_ttl
+        )
         self.locks.admit = self.replicator.admit
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
@@ -120,6 +124,7 @@ class Swarm:
         self.places.start(
             self._chord, self.index, options.holder_ttl, lambda: (self._peer_id, self.address)
         )
+        self.subscriptions.start(self._chord, self.grid)
         return address
 
     @property
@@ -215,6 +220,7 @@ class Swarm:
         try:  # bounded: with its neighbours dead, every step would wait for a timeout
             async with asyncio.timeout(3 * self.chord_options.timeout):
                 await self.replicator.withdraw_all()
+                await self.subscriptions.withdraw_all()
                 if self._chord is not None:
                     await self._chord.leave()
         except (MapError, TimeoutError) as exc:
@@ -231,6 +237,7 @@ class Swarm:
         """Stop renewals and the ring's tasks, and close the endpoint (fails
         pending requests)."""
         await self.replicator.close()
+        await self.subscriptions.close()
         if self._chord is not None:
             await self._chord.close()
         await self.locks.close()

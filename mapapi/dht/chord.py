@@ -463,13 +463,21 @@ class ChordNode:
             old is None or ring.in_interval(node.key, old.key, self.key, inclusive_right=False)
         ):
             return Ack()
+        # Hand the keys over first: until `node` is our predecessor, nobody routes
+        # to it (our predecessor adopts it from our answer), so no lookup can
+        # reach it before it holds them.
+        entries = self._entries(lambda k: not ring.responsible(k, self.key, node.key))
+        if entries:
+            await self._call(node, ChordStore(entries), Ack)
+            old = self.predecessor  # another node may have notified meanwhile
+            if old is not None and not ring.in_interval(
+                node.key, old.key, self.key, inclusive_right=False
+            ):
+                return Ack()
         self.predecessor = node
         self._suspects.pop(node.key, None)
         if self.successors == [self.me]:
             self.successors = [node]  # a second node: it is our successor too
-        entries = self._entries(lambda k: not ring.responsible(k, self.key, node.key))
-        if entries:
-            await self._call(node, ChordStore(entries), Ack)
         return Ack()
 
     async def rpc_leave(self, req: Request) -> Ack:

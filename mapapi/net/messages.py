@@ -311,6 +311,16 @@ class ChunkList:
     chunks: tuple[ChunkSummary, ...]
 
 
+@dataclass(frozen=True, slots=True)
+class TriggerPush:
+    """The revisions of one commit that match a subscription, for its subscriber."""
+
+    subscription: bytes
+    record: CommitRecord
+    revisions: tuple[Revision, ...]
+    tables: tuple[TableInfo, ...] = ()
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -337,6 +347,7 @@ SWARM_BODIES: dict[str, type] = {
     "chord_store": ChordStore,
     "chunk_list_query": ChunkListQuery,
     "chunk_list": ChunkList,
+    "trigger_push": TriggerPush,
     "hello": Hello,
     "welcome": Welcome,
     "bye": Bye,

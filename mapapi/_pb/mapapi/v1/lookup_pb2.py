@@ -22,18 +22,23 @@ _runtime_version.ValidateProtobufRuntimeVersion(
 _sym_db = _symbol_database.Default()
 
 
+from google.protobuf import struct_pb2 as google_dot_protobuf_dot_struct__pb2
 from mapapi._pb.mapapi.v1 import maps_pb2 as mapapi_dot_v1_dot_maps__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x16mapapi/v1/lookup.proto\x12\tmapapi.v1\x1a\x14mapapi/v1/maps.proto\"~\n\x0cSpatialEntry\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05table\x18\x02 \x01(\t\x12\x1d\n\x04\x62\x62ox\x18\x03 \x01(\x0b\x32\x0f.mapapi.v1.Box3\x12\x10\n\x08missions\x18\x04 \x03(\t\x12\x0e\n\x06holder\x18\x05 \x01(\x0c\x12\x0f\n\x07\x61\x64\x64ress\x18\x06 \x01(\t\"=\n\rSpatialFilter\x12\x1d\n\x04\x62\x62ox\x18\x01 \x01(\x0b\x32\x0f.mapapi.v1.Box3\x12\r\n\x05table\x18\x02 \x01(\tb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x16mapapi/v1/lookup.proto\x12\tmapapi.v1\x1a\x1cgoogle/protobuf/struct.proto\x1a\x14mapapi/v1/maps.proto\"~\n\x0cSpatialEntry\x12\r\n\x05\x63hunk\x18\x01 \x01(\x0c\x12\r\n\x05table\x18\x02 \x01(\t\x12\x1d\n\x04\x62\x62ox\x18\x03 \x01(\x0b\x32\x0f.mapapi.v1.Box3\x12\x10\n\x08missions\x18\x04 \x03(\t\x12\x0e\n\x06holder\x18\x05 \x01(\x0c\x12\x0f\n\x07\x61\x64\x64ress\x18\x06 \x01(\t\"=\n\rSpatialFilter\x12\x1d\n\x04\x62\x62ox\x18\x01 \x01(\x0b\x32\x0f.mapapi.v1.Box3\x12\r\n\x05table\x18\x02 \x01(\t\"\x96\x01\n\x0cSubscription\x12\n\n\x02id\x18\x01 \x01(\x0c\x12\x12\n\nsubscriber\x18\x02 \x01(\x0c\x12\x0f\n\x07\x61\x64\x64ress\x18\x03 \x01(\t\x12\x1f\n\x06region\x18\x04 \x01(\x0b\x32\x0f.mapapi.v1.Box3\x12\r\n\x05table\x18\x05 \x01(\t\x12%\n\x05where\x18\x06 \x03(\x0b\x32\x16.mapapi.v1.FieldFilter\"D\n\x0b\x46ieldFilter\x12\r\n\x05\x66ield\x18\x01 \x01(\t\x12&\n\x06\x65quals\x18\x02 \x01(\x0b\x32\x16.google.protobuf.Valueb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
 _builder.BuildTopDescriptorsAndMessages(DESCRIPTOR, 'mapapi.v1.lookup_pb2', _globals)
 if not _descriptor._USE_C_DESCRIPTORS:
   DESCRIPTOR._loaded_options = None
-  _globals['_SPATIALENTRY']._serialized_start=59
-  _globals['_SPATIALENTRY']._serialized_end=185
-  _globals['_SPATIALFILTER']._serialized_start=187
-  _globals['_SPATIALFILTER']._serialized_end=248
+  _globals['_SPATIALENTRY']._serialized_start=89
+  _globals['_SPATIALENTRY']._serialized_end=215
+  _globals['_SPATIALFILTER']._serialized_start=217
+  _globals['_SPATIALFILTER']._serialized_end=278
+  _globals['_SUBSCRIPTION']._serialized_start=281
+  _globals['_SUBSCRIPTION']._serialized_end=431
+  _globals['_FIELDFILTER']._serialized_start=433
+  _globals['_FIELDFILTER']._serialized_end=501
 # @@protoc_insertion_point(module_scope)

@@ -1,3 +1,4 @@
+from google.protobuf import struct_pb2 as _struct_pb2
 from mapapi._pb.mapapi.v1 import maps_pb2 as _maps_pb2
 from google.protobuf.internal import containers as _containers
 from google.protobuf import descriptor as _descriptor
@@ -30,3 +31,27 @@ class SpatialFilter(_message.Message):
     bbox: _maps_pb2.Box3
     table: str
     def __init__(self, bbox: _Optional[_Union[_maps_pb2.Box3, _Mapping]] = ..., table: _Optional[str] = ...) -> None: ...
+
+class Subscription(_message.Message):
+    __slots__ = ("id", "subscriber", "address", "region", "table", "where")
+    ID_FIELD_NUMBER: _ClassVar[int]
+    SUBSCRIBER_FIELD_NUMBER: _ClassVar[int]
+    ADDRESS_FIELD_NUMBER: _ClassVar[int]
+    REGION_FIELD_NUMBER: _ClassVar[int]
+    TABLE_FIELD_NUMBER: _ClassVar[int]
+    WHERE_FIELD_NUMBER: _ClassVar[int]
+    id: bytes
+    subscriber: bytes
+    address: str
+    region: _maps_pb2.Box3
+    table: str
+    where: _containers.RepeatedCompositeFieldContainer[FieldFilter]
+    def __init__(self, id: _Optional[bytes] = ..., subscriber: _Optional[bytes] = ..., address: _Optional[str] = ..., region: _Optional[_Union[_maps_pb2.Box3, _Mapping]] = ..., table: _Optional[str] = ..., where: _Optional[_Iterable[_Union[FieldFilter, _Mapping]]] = ...) -> None: ...
+
+class FieldFilter(_message.Message):
+    __slots__ = ("field", "equals")
+    FIELD_FIELD_NUMBER: _ClassVar[int]
+    EQUALS_FIELD_NUMBER: _ClassVar[int]
+    field: str
+    equals: _struct_pb2.Value
+    def __init__(self, field: _Optional[str] = ..., equals: _Optional[_Union[_struct_pb2.Value, _Mapping]] = ...) -> None: ...
