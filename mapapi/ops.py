@@ -21,6 +21,7 @@ from mapapi.errors import ItemNotFound, PeerNotRunning, UsageError
 from mapapi.history import change_kind
 from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.transaction import Op
+from mapapi.watch_ops import WatchOperations
 from mapapi.workspace import Workspace
 
 if TYPE_CHECKING:
@@ -35,11 +36,12 @@ Json = Any
 _ADDRESS = re.compile(r"tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d+|ipc://\S+")
 
 
-class Operations:
+class Operations(WatchOperations):
     """The CLI's operations over one peer (see the module docstring)."""
 
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
+        self._watches = {}
         self.views = Workspace(peer)
         self.on_shutdown: Callable[[], None] | None = None  # set by the peer daemon
         self._progress: dict[str, tuple[int, int]] = {}  # chunk -> (parts received, parts)
@@ -481,7 +483,8 @@ class Operations:
 
 OPERATIONS = frozenset(
     name
-    for name, value in vars(Operations).items()
+    for cls in Operations.__mro__
+    for name, value in vars(cls).items()
     if not name.startswith("_") and name != "call" and inspect.iscoroutinefunction(value)
 )
 

@@ -37,7 +37,8 @@ class WatchOperations:
     peer: Peer
 
     def _on_swarm(self) -> Peer:
-        raise NotImplementedError  # Operations provides it
+        """The peer, which must be on the network (Operations refines the error)."""
+        raise NotImplementedError
 
     _watches: dict[str, tuple[Subscription, float]]  # watch id -> (subscription, last poll)
 
