@@ -232,3 +232,7 @@ class MemoryStore:
                 i for i, h in self._items.items() if h.revisions[0].chunk_id == chunk_id
             ]:
                 del self._items[item_id]
+            # commit records stay (as in SQLite) but forget the dropped revisions, or
+            # installing the chunk again would skip them as applied already
+            for _, applied in self._commits.values():
+                applied[:] = [r for r in applied if r.chunk_id != chunk_id]

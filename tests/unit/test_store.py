@@ -139,6 +139,23 @@ class TestTablesAndChunks:
         assert writer.store.chunks("nope") == []
 
 
+class TestReplicas:
+    def test_a_dropped_chunk_installs_again_whole(self, store: Store, writer: Writer) -> None:
+        assert isinstance(store, MemoryStore | SqliteStore)  # both are ReplicaStores
+        item = ItemId.new()
+        writer.commit(1, (item, writer.c1, b"x"))
+        writer.commit(2, (item, writer.c1, b"y"), (ItemId.new(), writer.c2, b"z"))
+        revisions = store.chunk_revisions(writer.c1)
+        commits = store.chunk_commits(writer.c1)
+        store.drop_chunk(writer.c1)
+        assert store.history(item) == []
+
+        store.install_chunk(writer.c1, "t", "google.protobuf.Struct", revisions, commits, [AUTHOR])
+
+        assert store.chunk_revisions(writer.c1) == revisions
+        assert [r.data for r in store.history(item)] == [b"x", b"y"]
+
+
 class TestRevisions:
     def test_read_at_time(self, writer: Writer) -> None:
         a = ItemId.new()
