@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from mapapi.errors import ItemNotFound, PeerNotRunning, UsageError
 from mapapi.history import change_kind
 from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.maps.operations import MapOperations
 from mapapi.transaction import Op
 from mapapi.watch_ops import WatchOperations
 from mapapi.workspace import Workspace
@@ -36,7 +37,7 @@ Json = Any
 _ADDRESS = re.compile(r"tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d+|ipc://\S+")
 
 
-class Operations(WatchOperations):
+class Operations(WatchOperations, MapOperations):
     """The CLI's operations over one peer (see the module docstring)."""
 
     def __init__(self, peer: Peer) -> None:

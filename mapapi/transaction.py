@@ -352,14 +352,19 @@ class Transaction:
                 return revision.chunk_id
         raise ItemNotFound(f"no item {item_id} in table {table!r} at time {self.begin_time}")
 
-    def insert(
-        self, table: str, message: Message, chunk: ChunkId, item_id: ItemId | None = None
-    ) -> ItemId:
-        """Buffer a new item in `chunk`; returns its (new random) id."""
+    def _insertable(self, table: str, chunk: ChunkId) -> TableDescriptor:
+        """The table's descriptor, once the transaction is open and `chunk` is `table`'s."""
         self._check_open()
         descriptor = self._backend.table(table)
         if self._backend.chunk_table(chunk) != table:
             raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
+        return descriptor
+
+    def insert(
+        self, table: str, message: Message, chunk: ChunkId, item_id: ItemId | None = None
+    ) -> ItemId:
+        """Buffer a new item in `chunk`; returns its (new random) id."""
+        descriptor = self._insertable(table, chunk)
         item_id = item_id or ItemId.new()
         if item_id in self._changes:
             raise UsageError(f"item {item_id} is already changed in this transaction")
@@ -367,6 +372,19 @@ class Transaction:
             Op.INSERT, table, item_id, chunk, descriptor.encode(message)
         )
         return item_id
+
+    def insert_many(self, table: str, messages: Iterable[Message], chunk: ChunkId) -> list[ItemId]:
+        """Buffer new items in `chunk` (checked once, not per item, which is what
+        makes bulk imports fast); returns their new random ids."""
+        descriptor = self._insertable(table, chunk)
+        ids = []
+        for message in messages:
+            item_id = ItemId.new()
+            self._changes[item_id] = Change(
+                Op.INSERT, table, item_id, chunk, descriptor.encode(message)
+            )
+            ids.append(item_id)
+        return ids
 
     def update(self, table: str, item_id: ItemId, message: Message) -> None:
         """Buffer a new version of an existing item."""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Coroutine
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
@@ -14,6 +14,9 @@ if TYPE_CHECKING:
     from mapapi.peer import Peer
 
 T = TypeVar("T")
+
+PROGRESS_POLL_S = 0.2
+Progress = Callable[[Any], None]  # gets each answer of a progress operation
 
 
 class Ops(Protocol):
@@ -78,6 +81,29 @@ class Session:
     def call(self, op: str, **args: Any) -> Any:
         """Run one operation to completion and return its JSON result."""
         return self.run(self.ops.call(op, args))
+
+    def call_with_progress(
+        self, op: str, args: dict[str, Any], poll: tuple[str, dict[str, Any]], show: Progress
+    ) -> Any:
+        """Run operation `op` while asking operation `poll` (name, arguments)
+        how far it got, every 0.2 s; `show` gets each answer."""
+        return self.run(self._polled(op, args, poll, show))
+
+    async def _polled(
+        self, op: str, args: dict[str, Any], poll: tuple[str, dict[str, Any]], show: Progress
+    ) -> Any:
+        import asyncio
+
+        call = asyncio.ensure_future(self.ops.call(op, args))
+        try:
+            while True:
+                done, _ = await asyncio.wait({call}, timeout=PROGRESS_POLL_S)
+                if done:
+                    return call.result()
+                show(await self.ops.call(*poll))
+        finally:
+            if not call.done():
+                call.cancel()
 
     def close(self) -> None:
         """Release the repository, or the connection to its daemon."""

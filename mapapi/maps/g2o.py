@@ -150,6 +150,18 @@ def _edge(mission: str, tag: str, v: list[float], source: str, line: int) -> Gra
     return GraphEdge((mission, i), (mission, j), relative, information, kind)
 
 
+def looks_planar(graph: MissionGraph) -> bool:
+    """True when the mission says nothing a 2D (SE2) g2o file cannot: every pose
+    and edge lies in the plane and the information only weighs x, y and yaw."""
+    if not all(is_planar(p) for p in graph.vertices.values()):
+        return False
+    return all(
+        is_planar(e.relative)
+        and lift_information(project_information(e.information)) == tuple(e.information)
+        for e in graph.edges
+    )
+
+
 def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -> int:
     """Write a mission as g2o text; returns how many edges were written.
 

@@ -1,31 +1,37 @@
-"""Store pose graphs in a peer: one transaction per mission, all or nothing.
+"""Store missions in a peer: one transaction per mission, all or nothing.
 
-Each mission gets one chunk per table (missions, vertices, edges) by default.
-Everything is built and checked first; chunks are created and rows staged only
-then, and committed once, so a failing import leaves no rows and no chunks.
+A pose graph gets one chunk per table (missions, vertices, edges), a point
+cloud one chunk of missions and one of point-cloud blocks. Everything is built
+and checked first; chunks are created and rows staged only then, and committed
+once, so a failing import leaves no rows and no chunks. `import_missions`
+checks every name of a set before the first commit, so a clash stops the set
+before anything of it is written.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable
+import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from mapapi.ids import ChunkId, CommitId
+from mapapi.maps.cloud import PointCloud, cloud_blocks
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
 from mapapi.maps.schema import (
+    CLOUD_TABLES,
+    CLOUDS,
     EDGES,
     GRAPH_TABLES,
     MISSIONS,
     VERTICES,
-    edge_from_pb,
     edge_to_pb,
     mission_to_pb,
-    pose_from_pb,
     vertex_to_pb,
 )
+from mapapi.maps.stored import mission_names, reading
 from mapapi.spatial import BBox
 
 if TYPE_CHECKING:
@@ -37,12 +43,14 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]  # (rows staged, rows in all)
+MapSource = MissionGraph | PointCloud
 _PROGRESS_EVERY = 10_000
 
 
 @dataclass(frozen=True)
 class ImportResult:
-    """What one mission's import wrote."""
+    """What one mission's import wrote (`points` for a cloud, vertices and edges
+    for a graph)."""
 
     mission: str
     robot: str
@@ -51,23 +59,29 @@ class ImportResult:
     bbox: BBox | None
     chunks: dict[str, ChunkId]
     commit: CommitId
+    points: int = 0
+    commit_seconds: float = 0.0  # of the import's time, what the commit itself took
+
+    def elements(self) -> int:
+        """Vertices plus edges: the unit of the import speed target."""
+        return self.vertices + self.edges
 
 
-async def ensure_tables(peer: Peer) -> None:
-    """Create the graph tables that do not exist yet.
+async def ensure_tables(peer: Peer, tables: Mapping[str, type[Message]] = GRAPH_TABLES) -> None:
+    """Create the map tables (by default the graph tables) that do not exist yet.
 
     Raises:
         MapImportError: a table of that name holds another type.
     """
     existing = peer.tables()
-    for name, cls in GRAPH_TABLES.items():
+    for name, cls in tables.items():
         wanted = cls.DESCRIPTOR.full_name
         if name in existing and existing[name].type_name != wanted:
             raise MapImportError(
                 f"table {name!r} holds {existing[name].type_name}, not {wanted}; "
                 "import into another repository"
             )
-    for name, cls in GRAPH_TABLES.items():
+    for name, cls in tables.items():
         if name not in existing:
             await peer.create_table(name, cls)
 
@@ -114,6 +128,53 @@ def build_rows(graph: MissionGraph) -> dict[str, list[Message]]:
     }
 
 
+def build_cloud_rows(cloud: PointCloud) -> dict[str, list[Message]]:
+    """The mission row and the point blocks of a cloud.
+
+    Raises:
+        MapImportError: no name, or no points.
+    """
+    if not cloud.name:
+        raise MapImportError("a mission needs a name")
+    if len(cloud.points) == 0:
+        raise MapImportError("the cloud has no points", source=cloud.name)
+    return {MISSIONS: [mission_to_pb(cloud)], CLOUDS: list(cloud_blocks(cloud))}
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """One mission's rows, built and checked, ready to commit."""
+
+    source: MapSource
+    rows: dict[str, list[Message]]
+    tables: Mapping[str, type[Message]]
+    summary: str
+
+
+def _prepare(source: MapSource) -> _Prepared:
+    if isinstance(source, PointCloud):
+        rows = build_cloud_rows(source)
+        summary = f"{len(source.points)} points in {len(rows[CLOUDS])} blocks"
+        return _Prepared(source, rows, CLOUD_TABLES, summary)
+    summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges"
+    return _Prepared(source, build_rows(source), GRAPH_TABLES, summary)
+
+
+async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) -> ImportResult:
+    source = prepared.source
+    chunks, commit, seconds = await _commit_rows(
+        peer, source.name, prepared.rows, prepared.tables, prepared.summary, progress
+    )
+    log.info("imported mission %s (%s)", source.name, prepared.summary)
+    if isinstance(source, PointCloud):
+        vertices, edges, points = 0, 0, len(source.points)
+    else:
+        vertices, edges, points = len(source.vertices), len(source.edges), 0
+    return ImportResult(
+        source.name, source.robot, vertices, edges, source.bbox(), chunks, commit, points, seconds
+    )
+
+
 async def import_graph(
     peer: Peer,
     graph: MissionGraph,
@@ -137,36 +198,83 @@ async def import_graph(
         MapImportError: the graph is not importable, or the mission exists already.
         ConflictError: someone committed a mission of the same name meanwhile.
     """
-    graph = rename(graph, mission, robot)
-    rows = build_rows(graph)
-    await ensure_tables(peer)
+    return await _import(peer, _prepare(rename(graph, mission, robot)), progress)
+
+
+async def import_cloud(
+    peer: Peer, cloud: PointCloud, progress: Progress | None = None
+) -> ImportResult:
+    """Write a point cloud (its mission row and point blocks) in one commit.
+
+    Raises:
+        MapImportError: no points, or the mission exists already.
+        ConflictError: someone committed a mission of the same name meanwhile.
+    """
+    return await _import(peer, _prepare(cloud), progress)
+
+
+async def import_missions(
+    peer: Peer, sources: Sequence[MapSource], progress: Progress | None = None
+) -> list[ImportResult]:
+    """Import graphs and clouds, one commit per mission. Every mission is built
+    and checked, and no name may repeat or exist already, before the first
+    commit, so a bad mission writes nothing of the set.
+
+    Raises:
+        MapImportError: a name repeats or exists already, or a mission is not importable.
+    """
+    names = [s.name for s in sources]
+    clashes = sorted({n for n in names if names.count(n) > 1} | (set(names) & await _held(peer)))
+    if clashes:
+        raise MapImportError(
+            f"mission {', '.join(map(repr, clashes))} exists already; pass another name"
+        )
+    prepared = [_prepare(source) for source in sources]
+    return [await _import(peer, p, progress) for p in prepared]
+
+
+async def import_graphs(
+    peer: Peer, graphs: Sequence[MissionGraph], progress: Progress | None = None
+) -> list[ImportResult]:
+    """`import_graph` each mission in turn: one commit per mission."""
+    return await import_missions(peer, graphs, progress)
+
+
+async def _held(peer: Peer) -> set[str]:
+    if MISSIONS not in peer.tables():
+        return set()
+    async with reading(peer) as tx:
+        return await mission_names(tx)
+
+
+async def _commit_rows(
+    peer: Peer,
+    name: str,
+    rows: dict[str, list[Message]],
+    tables: Mapping[str, type[Message]],
+    summary: str,
+    progress: Progress | None,
+) -> tuple[dict[str, ChunkId], CommitId, float]:
+    """Stage one mission's rows in new chunks (one per table) and commit them;
+    on any failure, forget the staged rows and the chunks. Returns the chunks,
+    the commit and the seconds the commit took."""
+    await ensure_tables(peer, tables)
     tx = peer.begin()
-    existing = await tx.items(MISSIONS)
-    if any(getattr(m, "name", None) == graph.name for m in existing.values()):
+    if name in await mission_names(tx):
         tx.abort()
-        raise MapImportError(f"mission {graph.name!r} exists already; pass another name")
+        raise MapImportError(f"mission {name!r} exists already; pass another name")
     chunks: dict[str, ChunkId] = {}
     try:
         for table in rows:
             chunks[table] = await peer.create_chunk(table)
         _stage(tx, rows, chunks, progress)
-        record = await tx.commit(
-            f"import mission {graph.name}: {len(graph.vertices)} vertices, {len(graph.edges)} edges"
-        )
+        started = time.perf_counter()
+        record = await tx.commit(f"import mission {name}: {summary}")
     except BaseException:
         await _undo(peer, tx, chunks)
         raise
     assert record is not None  # a mission row is always written
-    log.info("imported mission %s (%d elements)", graph.name, graph.elements())
-    return ImportResult(
-        graph.name,
-        graph.robot,
-        len(graph.vertices),
-        len(graph.edges),
-        graph.bbox(),
-        chunks,
-        record.id,
-    )
+    return chunks, record.id, time.perf_counter() - started
 
 
 def _stage(
@@ -178,14 +286,12 @@ def _stage(
     total = sum(len(r) for r in rows.values())
     done = 0
     for table, messages in rows.items():
-        chunk = chunks[table]
-        for message in messages:
-            tx.insert(table, message, chunk)
-            done += 1
-            if progress is not None and done % _PROGRESS_EVERY == 0:
+        for start in range(0, len(messages), _PROGRESS_EVERY):
+            batch = messages[start : start + _PROGRESS_EVERY]
+            tx.insert_many(table, batch, chunks[table])
+            done += len(batch)
+            if progress is not None:
                 progress(done, total)
-    if progress is not None:
-        progress(done, total)
 
 
 async def _undo(peer: Peer, tx: Transaction, chunks: dict[str, ChunkId]) -> None:
@@ -196,41 +302,3 @@ async def _undo(peer: Peer, tx: Transaction, chunks: dict[str, ChunkId]) -> None
         log.debug("transaction could not be aborted", exc_info=True)
     for chunk in chunks.values():
         await peer.leave_chunk(chunk, force=True)
-
-
-async def import_graphs(
-    peer: Peer, graphs: Iterable[MissionGraph], progress: Progress | None = None
-) -> list[ImportResult]:
-    """`import_graph` each mission in turn: one commit per mission."""
-    return [await import_graph(peer, g, progress=progress) for g in graphs]
-
-
-async def load_graph(peer: Peer, mission: str) -> MissionGraph:
-    """Read a stored mission back as a `MissionGraph` (vertices by index).
-
-    Raises:
-        MapImportError: no such mission.
-    """
-    tx = peer.begin()
-    found = [m for m in (await tx.items(MISSIONS)).values() if getattr(m, "name", "") == mission]
-    if not found:
-        raise MapImportError(f"no mission {mission!r}")
-    row = found[0]
-    vertices = {
-        v.index: pose_from_pb(v.pose)
-        for v in (await tx.items(VERTICES)).values()
-        if getattr(v, "mission", "") == mission
-    }
-    edges = [
-        edge_from_pb(e)  # type: ignore[arg-type]
-        for e in (await tx.items(EDGES)).values()
-        if getattr(e, "mission", "") == mission
-    ]
-    tx.abort()
-    return MissionGraph(
-        mission,
-        getattr(row, "robot", ""),
-        getattr(row, "frame", ""),
-        dict(sorted(vertices.items())),
-        edges,
-    )

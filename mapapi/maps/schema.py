@@ -7,10 +7,12 @@ protobuf pool, so `TableDescriptor.named(..., "mapapi.v1.Vertex")` finds them.
 
 from __future__ import annotations
 
+from typing import Protocol
+
 from google.protobuf.message import Message
 
 from mapapi._pb.mapapi.v1 import maps_pb2
-from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph
+from mapapi.maps.graph import EdgeKind, GraphEdge
 from mapapi.maps.se3 import Pose
 from mapapi.spatial import BBox
 
@@ -30,8 +32,9 @@ PointCloudBlock = maps_pb2.PointCloudBlock
 Box3 = maps_pb2.Box3
 Pose3 = maps_pb2.Pose3
 
-# table name -> payload class, for the tables a graph import writes
+# table name -> payload class, for the tables a graph (or a cloud) import writes
 GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
+CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {
     **GRAPH_TABLES,
     LANDMARKS: Landmark,
@@ -62,10 +65,21 @@ def pose_from_pb(p: maps_pb2.Pose3) -> Pose:
     return (p.x, p.y, p.z, p.qx, p.qy, p.qz, p.qw)
 
 
-def mission_to_pb(graph: MissionGraph) -> maps_pb2.Mission:
-    """The mission row of a graph, with the box around its vertices."""
-    message = Mission(name=graph.name, robot=graph.robot, frame=graph.frame)
-    box = graph.bbox()
+class MissionSource(Protocol):
+    """What a mission row is made of: a `MissionGraph` or a `PointCloud`."""
+
+    name: str
+    robot: str
+    frame: str
+
+    def bbox(self) -> BBox | None:
+        """The box around its vertices or points."""
+
+
+def mission_to_pb(source: MissionSource) -> maps_pb2.Mission:
+    """The mission row of a graph or cloud, with the box around its vertices or points."""
+    message = Mission(name=source.name, robot=source.robot, frame=source.frame)
+    box = source.bbox()
     if box is not None:
         message.bbox.CopyFrom(box_to_pb(box))
     return message

@@ -268,6 +268,123 @@ def bench_spatial(
         plot_spatial(rows, plot, machine)
 
 
+@bench.command("import")
+@_repeatable(
+    "--dataset",
+    "datasets",
+    click.Choice(["intel", "parking-garage", "tunnels"]),
+    "Sample graph to import (repeat for several; default all three).",
+)
+@click.option(
+    "--store",
+    type=click.Choice(["sqlite", "memory"]),
+    default="sqlite",
+    show_default=True,
+    help="A fresh repository on disk, or the in-memory store (leaves SQLite out).",
+)
+@_per_run("--runs", 3, "Imports per data set, each into a fresh repository (the median counts).")
+@_DIR_OPTION
+@json_option
+def bench_import(
+    datasets: tuple[str, ...], store: str, runs: int, directory: str | None, as_json: bool
+) -> None:
+    """Graph elements (vertices + edges) imported per second (issue 5 target:
+    50,000), for the parse alone, parse + staging, and end to end with the commit.
+
+    With --json, one object per data set, one per line.
+    """
+    from mapapi.bench.maps import DATASETS, measure_import
+
+    for dataset in datasets or DATASETS:
+        result = measure_import(dataset, runs=runs, store=store, directory=directory)
+        _render(f"bench import: {dataset} ({store})", result, as_json)
+
+
+@bench.command("triggers")
+@_repeatable(
+    "--fraction",
+    "fractions",
+    click.FloatRange(0, 1),
+    "Share of each writer's commits inside the region (repeat; default 0.05, 0.1, 0.25, 0.5).",
+)
+@_repeatable(
+    "--mode",
+    "modes",
+    click.Choice(["triggers", "polling", "replication", "idle"]),
+    "How the subscribers follow the region (repeat; default all four).",
+)
+@click.option(
+    "--writers", "-w", default=2, show_default=True, type=click.IntRange(1, 16), help="Writers."
+)
+@click.option(
+    "--subscribers",
+    "-s",
+    default=2,
+    show_default=True,
+    type=click.IntRange(1, 16),
+    help="Subscribers to the region.",
+)
+@click.option(
+    "--peers",
+    "-p",
+    default=8,
+    show_default=True,
+    type=click.IntRange(2, 64),
+    help="Peers on the ring (writers, subscribers, and peers that only serve the ring).",
+)
+@click.option(
+    "--items", default=100, show_default=True, type=click.IntRange(3), help="Items per chunk."
+)
+@_per_run("--commits", 20, "Commits per writer, one per round.")
+@click.option("--seed", default=0, show_default=True, help="Seeds the peers' ids and the workload.")
+@_plot_option("bytes per subscriber against the share of commits inside the region")
+@json_option
+def bench_triggers(
+    fractions: tuple[float, ...],
+    modes: tuple[str, ...],
+    writers: int,
+    subscribers: int,
+    peers: int,
+    items: int,
+    commits: int,
+    seed: int,
+    plot: str | None,
+    as_json: bool,
+) -> None:
+    """Bytes a subscriber receives to follow a region (Map API paper, Fig. 6).
+
+    Writers commit small updates inside and outside a 20 m x 20 m region of a
+    200 m x 200 m map while subscribers follow it with triggers (pushes),
+    polling (a spatial query and a fetch after every round of commits) or
+    replication (holding the chunks); idle subscribers measure what a peer
+    receives only for serving the ring. After every round each subscriber
+    must know exactly the commits inside the region, or the command fails
+    (exit 1). With --json, one object per (fraction, mode), one per line.
+    """
+    from mapapi.bench import triggers
+    from mapapi.bench.lookup import environment
+
+    machine = environment()  # before the runs, whose own load would count otherwise
+    rows = triggers.measure_triggers(
+        fractions=fractions or triggers.FRACTIONS,
+        modes=modes or triggers.MODES,
+        writers=writers,
+        subscribers=subscribers,
+        peers=peers,
+        items=items,
+        commits=commits,
+        seed=seed,
+    )
+    for row in rows:
+        title = f"bench triggers: {row['mode']}, {row['inside_fraction']:g} inside the region"
+        _render(title, row, as_json)
+    triggers.check_triggers(rows)
+    if plot:
+        from mapapi.bench.plot import plot_triggers
+
+        plot_triggers(rows, plot, machine)
+
+
 @bench.command("plot")
 @click.argument("kind", type=click.Choice(["viewtest", "commit"]))
 @click.argument("results", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))

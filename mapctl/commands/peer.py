@@ -14,7 +14,6 @@ from mapctl.session import Session, json_option, pass_session
 if TYPE_CHECKING:
     from mapapi.repo import PeerRecord, Repository
 
-PROGRESS_POLL_S = 0.2
 
 _LISTEN_HELP = (
     "The swarm endpoint; port 0 picks a free port, and tcp://0.0.0.0:PORT listens on "
@@ -208,25 +207,13 @@ def participate_with_progress(session: Session, chunk_id: str) -> dict[str, Any]
     from mapctl import render
 
     with render.transfer(f"fetching chunk {chunk_id[:8]} with its history") as show:
-        result: dict[str, Any] = session.run(_watched(session, chunk_id, show))
+        result: dict[str, Any] = session.call_with_progress(
+            "participate",
+            {"chunk": chunk_id},
+            ("participate_progress", {"chunk": chunk_id}),
+            lambda state: show(state["received"], state["parts"]),
+        )
     return result
-
-
-async def _watched(session: Session, chunk_id: str, show: Any) -> Any:
-    """The participate call, polling its progress while it runs."""
-    import asyncio
-
-    call = asyncio.ensure_future(session.ops.call("participate", {"chunk": chunk_id}))
-    try:
-        while True:
-            done, _ = await asyncio.wait({call}, timeout=PROGRESS_POLL_S)
-            if done:
-                return call.result()
-            state = await session.ops.call("participate_progress", {"chunk": chunk_id})
-            show(state["received"], state["parts"])
-    finally:
-        if not call.done():
-            call.cancel()
 
 
 @click.command("participate")

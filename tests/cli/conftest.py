@@ -2,13 +2,17 @@
 
 `Mapctl` runs the click group in-process with `CliRunner` (fast). `Mapctl.main`
 runs `mapctl.cli.main`, the console script's error boundary, in-process too, so
-exit codes and the one-line error messages are the real ones.
+exit codes and the one-line error messages are the real ones. `daemon` serves
+the repository's peer daemon in the test's own event loop, so commands go
+through its control endpoint.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import sys
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,6 +20,9 @@ from typing import Any
 import pytest
 from click.testing import CliRunner, Result
 
+from mapapi import Repository
+from mapapi.daemon import serve
+from mapapi.repo import PeerRecord
 from mapctl.cli import cli, main
 
 STRUCT = "google.protobuf.Struct"
@@ -117,3 +124,54 @@ def points(mapctl: Mapctl) -> Mapctl:
     mapctl("table", "create", "pts", "--type", STRUCT)
     mapctl("chunk", "create", "pts")
     return mapctl
+
+
+DAEMON_TIMEOUT = 30.0  # seconds a served daemon may take to stop
+
+
+class InProcessDaemon:
+    """A daemon served by the test's event loop; the CLI runs in worker threads."""
+
+    def __init__(self, repo: Path) -> None:
+        self.repo = repo
+        self.mapctl = Mapctl(repo)
+        self.stop = asyncio.Event()
+        self.record: PeerRecord | None = None
+        self.task: asyncio.Task[None] | None = None
+
+    async def start(self) -> PeerRecord:
+        ready: asyncio.Future[PeerRecord] = asyncio.get_running_loop().create_future()
+        self.task = asyncio.create_task(
+            serve(Repository.find(self.repo), stop=self.stop, ready=ready.set_result)
+        )
+        waiting: list[asyncio.Future[Any]] = [ready, self.task]
+        done, _ = await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
+        if self.task in done:
+            self.task.result()  # raises what failed
+        self.record = ready.result()
+        return self.record
+
+    async def __call__(self, *args: str, view: str | None = None) -> Outcome:
+        """`mapctl ARGS` through the console script's error boundary, in a thread."""
+        return await asyncio.to_thread(self.mapctl.main, *args, view=view)
+
+    async def json(self, *args: str, view: str | None = None) -> Any:
+        """`mapctl ARGS --json`, which must succeed; the parsed document."""
+        outcome = await self(*args, "--json", view=view)
+        assert outcome.code == 0, outcome
+        return json.loads(outcome.out)
+
+    async def close(self) -> None:
+        self.stop.set()
+        if self.task is not None:
+            async with asyncio.timeout(DAEMON_TIMEOUT):
+                await self.task
+
+
+@pytest.fixture
+async def daemon(repo: Path) -> AsyncIterator[InProcessDaemon]:
+    """The repository's peer daemon, served in the test's event loop; stopped after it."""
+    served = InProcessDaemon(repo)
+    await served.start()
+    yield served
+    await served.close()

@@ -15,18 +15,17 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
 from mapapi import Repository
 from mapapi.control import endpoints
-from mapapi.daemon import advertised_address, serve, stop_daemon
+from mapapi.daemon import advertised_address, stop_daemon
 from mapapi.repo import PeerRecord
 from mapapi.testing import wait_until
-from tests.cli.conftest import STRUCT, Mapctl, Outcome
+from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl
 
 CHUNK = "0123456789abcdef0123456789abcdef"
 TIMEOUT = 30.0
@@ -135,52 +134,6 @@ class TestAdvertisedAddress:
         assert address.startswith("tcp://")
         assert address.endswith(":7000")
         assert "0.0.0.0" not in address
-
-
-class InProcessDaemon:
-    """A daemon served by the test's event loop; the CLI runs in worker threads."""
-
-    def __init__(self, repo: Path) -> None:
-        self.repo = repo
-        self.mapctl = Mapctl(repo)
-        self.stop = asyncio.Event()
-        self.record: PeerRecord | None = None
-        self.task: asyncio.Task[None] | None = None
-
-    async def start(self) -> PeerRecord:
-        ready: asyncio.Future[PeerRecord] = asyncio.get_running_loop().create_future()
-        self.task = asyncio.create_task(
-            serve(Repository.find(self.repo), stop=self.stop, ready=ready.set_result)
-        )
-        waiting: list[asyncio.Future[Any]] = [ready, self.task]
-        done, _ = await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
-        if self.task in done:
-            self.task.result()  # raises what failed
-        self.record = ready.result()
-        return self.record
-
-    async def __call__(self, *args: str, view: str | None = None) -> Outcome:
-        """`mapctl ARGS` through the console script's error boundary, in a thread."""
-        return await asyncio.to_thread(self.mapctl.main, *args, view=view)
-
-    async def json(self, *args: str, view: str | None = None) -> Any:
-        outcome = await self(*args, "--json", view=view)
-        assert outcome.code == 0, outcome
-        return json.loads(outcome.out)
-
-    async def close(self) -> None:
-        self.stop.set()
-        if self.task is not None:
-            async with asyncio.timeout(TIMEOUT):
-                await self.task
-
-
-@pytest.fixture
-async def daemon(repo: Path) -> AsyncIterator[InProcessDaemon]:
-    served = InProcessDaemon(repo)
-    await served.start()
-    yield served
-    await served.close()
 
 
 class TestThroughTheDaemon:

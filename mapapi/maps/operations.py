@@ -1,0 +1,266 @@
+"""The map operations of `mapctl` (import, export, missions, plot), JSON in and out.
+
+`MapOperations` is a mixin of `mapapi.ops.Operations`, so these run in the
+peer daemon when one runs, like every other operation. File paths are the
+caller's; `mapctl` sends them absolute, since the daemon's working folder is
+not the caller's. Reading files and drawing run in a worker thread, so the peer
+keeps serving (and `import_progress` answers) meanwhile. The readers, which
+need numpy, are imported when first used: every `mapctl` command imports this.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import fnmatch
+import os
+import time
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mapapi.errors import UsageError
+from mapapi.ids import PeerId
+from mapapi.maps.g2o import looks_planar, write_g2o
+from mapapi.maps.graph import MissionGraph
+from mapapi.maps.schema import MISSIONS
+from mapapi.spatial import BBox
+
+if TYPE_CHECKING:
+    from mapapi.maps.cloud import PointCloud
+    from mapapi.maps.importer import ImportResult
+    from mapapi.maps.stored import MissionInfo
+    from mapapi.net.messages import Member
+    from mapapi.peer import Peer
+
+Json = Any
+
+
+def _box(box: BBox | None) -> list[float] | None:
+    return None if box is None else list(box.as_tuple())
+
+
+def import_json(result: ImportResult) -> Json:
+    """One imported mission."""
+    return {
+        "name": result.mission,
+        "robot": result.robot,
+        "vertices": result.vertices,
+        "edges": result.edges,
+        "points": result.points,
+        "bbox": _box(result.bbox),
+        "chunks": dict(result.chunks),
+        "commit": result.commit,
+    }
+
+
+def member_json(member: Member) -> Json:
+    """A holder: its id, name and address."""
+    return {"id": member.id, "name": member.name, "address": member.address}
+
+
+class MapOperations:
+    """Map operations over `self.peer` (see the module docstring)."""
+
+    peer: Peer
+
+    def _on_swarm(self) -> Peer:
+        """The peer, which must be on the network (Operations refines the error)."""
+        raise NotImplementedError
+
+    @cached_property
+    def _imports(self) -> dict[str, tuple[int, int]]:
+        """Path -> (done, total) of each import running here."""
+        return {}
+
+    async def import_map(
+        self,
+        path: str,
+        fmt: str | None = None,
+        mission: str | None = None,
+        robot: str | None = None,
+        voxel: float | None = None,
+    ) -> Json:
+        """Import a map file or Kimera folder: parse it all, then one commit per
+        mission; a malformed file commits nothing (the error names the line)."""
+        from mapapi.maps.importer import import_missions
+        from mapapi.maps.source import detect_format, read_source
+
+        source = _absolute(path)
+        fmt = fmt or detect_format(source)
+
+        def report(done: int, total: int) -> None:
+            self._imports[path] = (done, total)
+
+        started = time.perf_counter()
+        self._imports[path] = (0, 0)
+        try:
+            sources = await asyncio.to_thread(
+                read_source, source, fmt, mission=mission, robot=robot, voxel=voxel, progress=report
+            )
+            results = await import_missions(self.peer, sources, report)
+        finally:
+            self._imports.pop(path, None)
+        seconds = time.perf_counter() - started
+        elements = sum(r.elements() for r in results)
+        return {
+            "path": str(source),
+            "format": fmt,
+            "missions": [import_json(r) for r in results],
+            "elements": elements,
+            "points": sum(r.points for r in results),
+            "seconds": round(seconds, 4),
+            "elements_per_s": round(elements / seconds) if seconds > 0 else None,
+        }
+
+    async def import_progress(self, path: str) -> Json:
+        """How far a running `import_map(path)` got: (done, total) of its current
+        phase, total 0 while unknown (0 of 0 when none runs)."""
+        done, total = self._imports.get(path, (0, 0))
+        return {"path": path, "done": done, "total": total}
+
+    async def export_map(self, mission: str, path: str) -> Json:
+        """Write a mission to a file: a graph as g2o (2D when it is planar), a
+        cloud as PLY or PCD, by the extension."""
+        from mapapi.maps.cloud_file import CLOUD_FORMATS, write_cloud
+        from mapapi.maps.stored import load_cloud, load_graph
+
+        target = _absolute(path)
+        fmt = target.suffix.lower().lstrip(".")
+        if fmt == "g2o":
+            graph = await load_graph(self.peer, mission)
+            if not graph.vertices:
+                raise UsageError(f"mission {mission!r} has no pose graph; export it as .ply")
+            written = await asyncio.to_thread(_write_graph, graph, target)
+            # edges to other missions' vertices have no place in a one-mission g2o file
+            left_out = len(graph.edges) - written
+            counts = {"vertices": len(graph.vertices), "edges": written, "left_out": left_out}
+        elif fmt in CLOUD_FORMATS:
+            cloud = await load_cloud(self.peer, mission)
+            if len(cloud.points) == 0:
+                raise UsageError(f"mission {mission!r} has no point cloud; export it as .g2o")
+            counts = {"points": await asyncio.to_thread(write_cloud, cloud, target)}
+        else:
+            raise UsageError(f"export to a .g2o, .ply or .pcd file, not {target.name!r}")
+        return {"mission": mission, "path": str(target), "format": fmt, **counts}
+
+    async def missions(self, swarm: bool = False) -> Json:
+        """The missions held here with their counts, box and holders; with
+        `swarm`, also those the spatial index lists on other peers (counts None)."""
+        from mapapi.maps.stored import list_missions
+
+        peer = self._on_swarm() if swarm else self.peer
+        held = await list_missions(peer)
+        rows = [self._mission_json(info) for info in held]
+        if swarm:
+            names = {info.name for info in held}
+            for found in await peer.query_bbox(peer.grid.bounds, MISSIONS):
+                for name in found.ref.missions:
+                    if name not in names and not found.held:
+                        holders = [self._holder(m.id, m.address) for m in found.holders]
+                        rows.append(_remote_json(name, found.ref.bbox, holders))
+                        names.add(name)
+        return {"missions": sorted(rows, key=lambda r: r["name"])}
+
+    def _mission_json(self, info: MissionInfo) -> Json:
+        return {
+            "name": info.name,
+            "robot": info.robot,
+            "kind": info.kind,
+            "vertices": info.vertices,
+            "edges": info.edges,
+            "points": info.points,
+            "bbox": _box(info.bbox),
+            "chunks": dict(info.chunks),
+            "holders": [self._holder(p) for p in info.holders],
+            "held": True,
+        }
+
+    def _holder(self, peer_id: PeerId, address: str = "") -> Json:
+        """A holder by id, named (and addressed) as this peer knows it."""
+        peer = self.peer
+        if peer_id == peer.id:
+            address = peer.address if peer.swarm is not None else ""
+            return {"id": peer.id, "name": peer.name, "address": address}
+        known = {s.member.id: s.member for s in peer.members()} if peer.swarm is not None else {}
+        member = known.get(peer_id)
+        return member_json(member) if member else {"id": peer_id, "name": "", "address": address}
+
+    async def plot_map(
+        self,
+        path: str,
+        bbox: list[float] | None = None,
+        missions: list[str] | None = None,
+        up: str = "auto",
+    ) -> Json:
+        """Draw a top-down PNG of the missions named or matching a pattern
+        (default: every mission held here, or those overlapping `bbox`), with
+        `bbox` outlined."""
+        from mapapi.maps.plot import plot_map
+        from mapapi.maps.stored import list_missions, load_cloud, load_graph
+
+        box = None if bbox is None else BBox.from_tuple(bbox)
+        chosen = _choose(await list_missions(self.peer), missions, box)
+        graphs: list[MissionGraph] = []
+        clouds: list[PointCloud] = []
+        for info in chosen:
+            if info.kind == "cloud":
+                clouds.append(await load_cloud(self.peer, info.name))
+            else:
+                graphs.append(await load_graph(self.peer, info.name))
+        target = _absolute(path)
+        drawn = await asyncio.to_thread(plot_map, target, graphs, clouds, box, up)
+        return {
+            "path": str(target),
+            "renderer": drawn.renderer,
+            "up": drawn.up,
+            "missions": drawn.missions,
+            "bbox": _box(box),
+        }
+
+
+def _absolute(path: str) -> Path:
+    """`path` from the caller's folder (the CLI sends absolute paths)."""
+    return Path(os.path.abspath(os.path.expanduser(path)))
+
+
+def _write_graph(graph: MissionGraph, target: Path) -> int:
+    with target.open("w", encoding="utf-8") as out:
+        return write_g2o(graph, out, planar=looks_planar(graph))
+
+
+def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:
+    return {
+        "name": name,
+        "robot": None,
+        "kind": None,
+        "vertices": None,
+        "edges": None,
+        "points": None,
+        "bbox": _box(box),
+        "chunks": {},
+        "holders": holders,
+        "held": False,
+    }
+
+
+def _choose(
+    held: list[MissionInfo], names: list[str] | None, box: BBox | None
+) -> list[MissionInfo]:
+    """The missions to draw (see `plot_map`); a name may be a shell pattern
+    (`tunnels-*`).
+
+    Raises:
+        UsageError: a name or pattern matches no mission held here, or none is left to draw.
+    """
+    if names:
+        missing = [n for n in names if not any(fnmatch.fnmatchcase(i.name, n) for i in held)]
+        if missing:
+            raise UsageError(
+                f"no mission {', '.join(map(repr, missing))} here; `mapctl missions` lists them"
+            )
+        return [i for i in held if any(fnmatch.fnmatchcase(i.name, n) for n in names)]
+    chosen = [i for i in held if box is None or (i.bbox is not None and i.bbox.overlaps(box))]
+    if not chosen:
+        where = " in that box" if box is not None else ""
+        raise UsageError(f"no mission held here{where}; import one with `mapctl import`")
+    return chosen

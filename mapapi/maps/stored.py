@@ -1,0 +1,156 @@
+"""Read stored missions back: their names, a summary of each, a graph or a cloud.
+
+Everything here reads through one transaction, so a listing or a mission is
+consistent as of one logical time even while others commit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from mapapi.ids import ChunkId, PeerId
+from mapapi.maps.cloud import PointCloud, cloud_from_blocks
+from mapapi.maps.errors import MapImportError
+from mapapi.maps.graph import MissionGraph
+from mapapi.maps.schema import (
+    CLOUDS,
+    EDGES,
+    MISSIONS,
+    VERTICES,
+    box_from_pb,
+    edge_from_pb,
+    pose_from_pb,
+)
+from mapapi.spatial import BBox
+
+if TYPE_CHECKING:
+    from mapapi.peer import Peer
+    from mapapi.transaction import Transaction
+
+
+@dataclass
+class MissionInfo:
+    """A summary of one mission held here.
+
+    Attributes:
+        chunks: table -> the chunk of that table holding the mission's rows.
+        holders: the peers holding the mission row's chunk.
+    """
+
+    name: str
+    robot: str
+    frame: str
+    bbox: BBox | None
+    vertices: int = 0
+    edges: int = 0
+    points: int = 0
+    chunks: dict[str, ChunkId] = field(default_factory=dict)
+    holders: list[PeerId] = field(default_factory=list)
+
+    @property
+    def kind(self) -> str:
+        """What the mission holds: "cloud" when it has points, else "graph"."""
+        return "cloud" if self.points else "graph"
+
+
+@asynccontextmanager
+async def reading(peer: Peer) -> AsyncIterator[Transaction]:
+    """A transaction begun now, to read in; aborted afterwards (it never writes)."""
+    tx = peer.begin()
+    try:
+        yield tx
+    finally:
+        tx.abort()
+
+
+async def mission_names(tx: Transaction) -> set[str]:
+    """The names of the missions `tx` sees (the missions table must exist)."""
+    return {str(getattr(m, "name", "")) for m in (await tx.items(MISSIONS)).values()}
+
+
+async def _rows_of(peer: Peer, tx: Transaction, table: str, mission: str) -> list[Any]:
+    if table not in peer.tables():
+        return []
+    return [m for m in (await tx.items(table)).values() if getattr(m, "mission", "") == mission]
+
+
+async def _mission_row(peer: Peer, tx: Transaction, mission: str) -> Any:
+    rows = (await tx.items(MISSIONS)).values() if MISSIONS in peer.tables() else []
+    found = [m for m in rows if getattr(m, "name", "") == mission]
+    if not found:
+        raise MapImportError(
+            f"no mission {mission!r} here; `mapctl missions` lists them, "
+            "`mapctl query-bbox --load` fetches others' missions"
+        )
+    return found[0]
+
+
+async def load_graph(peer: Peer, mission: str) -> MissionGraph:
+    """Read a stored mission back as a `MissionGraph` (vertices by index).
+
+    Raises:
+        MapImportError: no such mission.
+    """
+    async with reading(peer) as tx:
+        row = await _mission_row(peer, tx, mission)
+        vertices = {
+            v.index: pose_from_pb(v.pose) for v in await _rows_of(peer, tx, VERTICES, mission)
+        }
+        edges = [edge_from_pb(e) for e in await _rows_of(peer, tx, EDGES, mission)]
+    return MissionGraph(mission, row.robot, row.frame, dict(sorted(vertices.items())), edges)
+
+
+async def load_cloud(peer: Peer, mission: str) -> PointCloud:
+    """Read a stored mission's point cloud back (its points in block order).
+
+    Raises:
+        MapImportError: no such mission.
+    """
+    async with reading(peer) as tx:
+        row = await _mission_row(peer, tx, mission)
+        blocks = await _rows_of(peer, tx, CLOUDS, mission)
+    return cloud_from_blocks(mission, row.robot, row.frame, blocks)
+
+
+async def list_missions(peer: Peer) -> list[MissionInfo]:
+    """Every mission held here, by name, with its counts, chunks and holders."""
+    async with reading(peer) as tx:
+        infos = await _summaries(peer, tx)
+    for info in infos.values():
+        chunk = info.chunks.get(MISSIONS)
+        info.holders = peer.holders(chunk) if chunk is not None else []
+    return [infos[name] for name in sorted(infos)]
+
+
+async def _summaries(peer: Peer, tx: Transaction) -> dict[str, MissionInfo]:
+    infos: dict[str, MissionInfo] = {}
+    for chunk, row in await _by_chunk(peer, tx, MISSIONS):
+        box = box_from_pb(row.bbox) if row.HasField("bbox") else None
+        infos[row.name] = MissionInfo(row.name, row.robot, row.frame, box)
+        infos[row.name].chunks[MISSIONS] = chunk
+    for table in (VERTICES, EDGES, CLOUDS):
+        for chunk, row in await _by_chunk(peer, tx, table):
+            info = infos.get(row.mission)
+            if info is None:
+                continue  # rows whose mission row is not held here
+            info.chunks.setdefault(table, chunk)
+            if table == VERTICES:
+                info.vertices += 1
+            elif table == EDGES:
+                info.edges += 1
+            else:
+                info.points += row.count
+    return infos
+
+
+async def _by_chunk(peer: Peer, tx: Transaction, table: str) -> list[tuple[ChunkId, Any]]:
+    """Every (chunk, row) of `table` held here."""
+    if table not in peer.tables():
+        return []
+    rows: list[tuple[ChunkId, Any]] = []
+    for info in peer.chunks(table):
+        rows += [(info.id, m) for m in (await tx.items(table, info.id)).values()]
+    return rows

@@ -1,0 +1,210 @@
+"""Missions: `import`, `export`, `missions`, `plot` (the application layer, DESIGN §2)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+
+from mapctl.session import Session, json_option, pass_session
+
+FORMATS = ("g2o", "kimera-csv", "ply", "pcd")  # mapapi.maps.source.FORMATS, kept import-free
+
+
+def _bbox_text(box: list[float] | None) -> str:
+    return "-" if box is None else " ".join(str(round(v)) for v in box)  # to the metre
+
+
+def _size_text(mission: dict[str, Any]) -> str:
+    if mission["vertices"] is None:
+        return "?"  # held elsewhere: only its box is known here
+    if mission["points"]:
+        return f"{mission['points']} points"
+    return f"{mission['vertices']} v + {mission['edges']} e"
+
+
+def _holders_text(holders: list[dict[str, Any]]) -> str:
+    return ", ".join(h["name"] or h["id"][:8] for h in holders) or "?"
+
+
+@click.command("import")
+@click.argument("file", type=click.Path(exists=True, path_type=Path))
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(FORMATS),
+    help="The file's format (default: by extension; a folder is a Kimera set).",
+)
+@click.option(
+    "--mission", help="The mission's name (default: the file's); a prefix for a Kimera set."
+)
+@click.option("--robot", help="The robot's name (sources of one mission only).")
+@click.option(
+    "--voxel",
+    type=click.FloatRange(0),
+    help="Point clouds: keep one point per voxel of this side in metres; 0 keeps all "
+    "[default: 0.05].",
+)
+@json_option
+@pass_session
+def import_map(
+    session: Session,
+    file: Path,
+    fmt: str | None,
+    mission: str | None,
+    robot: str | None,
+    voxel: float | None,
+    as_json: bool,
+) -> None:
+    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud.
+
+    Each mission is one commit, in new chunks (one per table); a malformed file
+    stops with the line it failed on, and nothing is committed.
+    """
+    from mapctl import render
+
+    path = str(file.resolve())
+    args = {"path": path, "fmt": fmt, "mission": mission, "robot": robot, "voxel": voxel}
+    with render.transfer(f"importing {file.name}") as show:
+        info = session.call_with_progress(
+            "import_map",
+            args,
+            ("import_progress", {"path": path}),
+            lambda state: show(state["done"], state["total"]),
+        )
+    if as_json:
+        render.emit_json(info)
+        return
+    rows = [
+        (m["name"], m["robot"] or "-", _size_text(m), _bbox_text(m["bbox"]), m["commit"][:8])
+        for m in info["missions"]
+    ]
+    title = f"imported {file.name} ({info['format']})"
+    render.table(title, ["name", "robot", "size", "bbox", "commit"], rows)
+    rate = f" ({info['elements_per_s']:,} elements/s)" if info["elements"] else ""
+    render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
+
+
+def _output_option(text: str) -> Any:
+    """`-o/--output FILE`, required."""
+    return click.option(
+        "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help=text
+    )
+
+
+@click.command("export")
+@click.argument("mission")
+@_output_option("The file to write: .g2o for a pose graph, .ply or .pcd for a point cloud.")
+@json_option
+@pass_session
+def export_map(session: Session, mission: str, output: Path, as_json: bool) -> None:
+    """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
+    a point cloud as binary PLY (or PCD)."""
+    from mapctl import render
+
+    info = session.call("export_map", mission=mission, path=str(output.resolve()))
+    if as_json:
+        render.emit_json(info)
+        return
+    if info["format"] == "g2o":
+        what = f"{info['vertices']} vertices, {info['edges']} edges"
+        if info["left_out"]:
+            what += f" ({info['left_out']} edges to other missions left out)"
+    else:
+        what = f"{info['points']} points"
+    render.line(f"wrote mission {mission} to {output}: {what}")
+
+
+@click.command("missions")
+@click.option(
+    "--swarm", is_flag=True, help="Also list the missions other peers hold (needs a running peer)."
+)
+@json_option
+@pass_session
+def missions(session: Session, swarm: bool, as_json: bool) -> None:
+    """List the missions held here: robot, size (vertices + edges, or points),
+    box (to the metre) and holders."""
+    from mapctl import render
+
+    info = session.call("missions", swarm=swarm)
+    if as_json:
+        render.emit_json(info)
+        return
+    columns = ["name", "robot", "size", "bbox", "holders"] + (["here"] if swarm else [])
+    rows = [
+        (
+            m["name"],
+            m["robot"] or "-",
+            _size_text(m),
+            _bbox_text(m["bbox"]),
+            _holders_text(m["holders"]),
+            "yes" if m["held"] else "no",
+        )[: len(columns)]
+        for m in info["missions"]
+    ]
+    render.table("missions", columns, rows)
+
+
+@click.command("plot")
+@click.option(
+    "--bbox",
+    nargs=6,
+    type=float,
+    metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX",
+    help="Outline this box (and, without --mission, draw the missions it overlaps).",
+)
+@click.option(
+    "--mission",
+    "-m",
+    "names",
+    multiple=True,
+    help="Draw this mission, or those matching a pattern like 'tunnels-*' (repeat; "
+    "default: every mission held here).",
+)
+@click.option(
+    "--up",
+    type=click.Choice(["auto", "x", "y", "z"]),
+    default="auto",
+    show_default=True,
+    help="The axis to look down (auto: the one along which the map is thinnest).",
+)
+@_output_option("The PNG to write.")
+@json_option
+@pass_session
+def plot(
+    session: Session,
+    bbox: tuple[float, ...] | None,
+    names: tuple[str, ...],
+    up: str,
+    output: Path,
+    as_json: bool,
+) -> None:
+    """Draw a top-down PNG of missions: trajectories coloured per robot, loop
+    closures, inter-robot edges, point clouds and the query box.
+
+    Point clouds alone are rendered by open3d offscreen where a renderer works,
+    else (and with graphs) drawn with matplotlib.
+    """
+    from mapctl import render
+
+    info = session.call(
+        "plot_map",
+        path=str(output.resolve()),
+        bbox=list(bbox) if bbox else None,
+        missions=list(names) or None,
+        up=up,
+    )
+    if as_json:
+        render.emit_json(info)
+        return
+    render.line(
+        f"wrote {output}: {len(info['missions'])} mission(s), looking down {info['up']} "
+        f"({info['renderer']})"
+    )
+
+
+def register(cli: click.Group) -> None:
+    """Add this module's commands to `cli`."""
+    for command in (import_map, export_map, missions, plot):
+        cli.add_command(command)

@@ -1,0 +1,99 @@
+"""Imported missions in the spatial index (issue 5 §1): a graph or a point cloud
+imported on one peer is found by its box from another, which can then load it.
+
+Every peer is a real node of a settled Chord ring (`lookup_swarm`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mapapi import Peer
+from mapapi.maps import (
+    CLOUDS,
+    MISSIONS,
+    VERTICES,
+    import_cloud,
+    import_graph,
+    list_missions,
+    load_cloud,
+    read_g2o,
+)
+from mapapi.maps.cloud_file import read_cloud
+from mapapi.ops import Operations
+from mapapi.spatial import BBox
+
+from .conftest import MakePeer, lookup_swarm
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
+INTEL = SAMPLES / "pose_graphs" / "intel.g2o"  # x -9.5..15.9, y -22.5..3.4, z 0
+ROOM = SAMPLES / "point_clouds" / "room_scan1.pcd"  # x -13.8..15.4, y -6.5..8.0
+
+
+async def found_by_table(peer: Peer, box: BBox) -> dict[str, list[tuple[str, ...]]]:
+    """table -> the missions of each chunk `peer` finds in `box`."""
+    out: dict[str, list[tuple[str, ...]]] = {}
+    for hit in await peer.query_bbox(box):
+        out.setdefault(hit.ref.table, []).append(hit.ref.missions)
+    return out
+
+
+async def test_an_imported_graph_is_found_by_its_mission_box_elsewhere(
+    make_peer: MakePeer,
+) -> None:
+    a, b, c = await lookup_swarm(make_peer, 3)
+    result = await import_graph(a, read_g2o(INTEL), robot="hahnel")
+
+    hits = await c.query_bbox(BBox(10, -20, -1, 11, -19, 1), table=MISSIONS)
+
+    (hit,) = hits
+    assert hit.ref.missions == ("intel",)
+    assert hit.ref.chunk == result.chunks[MISSIONS]
+    assert hit.ref.bbox == result.bbox
+    assert ([m.id for m in hit.holders], hit.held) == ([a.id], False)
+    # the vertices are placed too; the edges, which have no place, are not
+    assert await found_by_table(b, BBox(-100, -100, -10, 100, 100, 10)) == {
+        MISSIONS: [("intel",)],
+        VERTICES: [()],
+    }
+    assert await c.query_bbox(BBox(50, 50, -1, 60, 60, 1)) == []
+
+    await c.participate(hit.ref.chunk)
+    (info,) = await list_missions(c)
+    assert (info.name, info.robot, info.bbox) == ("intel", "hahnel", result.bbox)
+    assert sorted(info.holders) == sorted([a.id, c.id])
+
+
+async def test_a_point_cloud_is_found_and_loaded_from_another_peer(make_peer: MakePeer) -> None:
+    a, b = await lookup_swarm(make_peer, 2)
+    cloud = read_cloud(ROOM, voxel=0.2)
+    result = await import_cloud(a, cloud)
+
+    hits = await b.query_bbox(BBox(14, 7, 0, 20, 20, 1))
+
+    assert {h.ref.table: h.ref.missions for h in hits} == {
+        MISSIONS: ("room_scan1",),
+        CLOUDS: (),
+    }
+    for hit in hits:
+        await b.participate(hit.ref.chunk)
+    loaded = await load_cloud(b, "room_scan1")
+    assert len(loaded.points) == result.points == len(cloud.points)
+    assert np.array_equal(np.sort(loaded.points, axis=0), np.sort(cloud.points, axis=0))
+
+
+async def test_missions_with_swarm_lists_what_others_hold(make_peer: MakePeer) -> None:
+    a, b = await lookup_swarm(make_peer, 2)
+    await import_graph(a, read_g2o(INTEL))
+    await import_cloud(b, read_cloud(ROOM, voxel=0.5))
+
+    here = await Operations(b).missions()
+    everywhere = await Operations(b).missions(swarm=True)
+
+    assert [m["name"] for m in here["missions"]] == ["room_scan1"]
+    intel, room = everywhere["missions"]
+    assert (intel["name"], intel["held"], intel["vertices"]) == ("intel", False, None)
+    assert intel["holders"] == [{"id": a.id, "name": a.name, "address": a.address}]
+    assert (room["name"], room["held"], room["holders"][0]["id"]) == ("room_scan1", True, b.id)
