@@ -15,9 +15,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from mapapi.clock import LamportClock
-from mapapi.errors import ConflictError, LockNotHeld, LockTimeout
+from mapapi.errors import CommitUncertain, ConflictError, LockNotHeld, LockTimeout
 from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.quorum import is_quorum
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.transaction import (
     Change,
@@ -29,9 +30,9 @@ from mapapi.transaction import (
 )
 
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
-    from collections.abc import Awaitable, Callable
+    from collections.abc import Awaitable, Callable, Sequence
 
-    from mapapi.lock_client import LockService
+    from mapapi.lock_client import Held, LockService
     from mapapi.replication import Replicator
 
 
@@ -130,6 +131,28 @@ def commit_locally(
     return decision.record
 
 
+def _check_confirmed(
+    held: Sequence[Held],
+    record: CommitRecord,
+    unconfirmed: Sequence[tuple[ChunkId, PeerId]],
+    me: PeerId,
+) -> None:
+    """Raise CommitUncertain unless, for every chunk, the holders that applied the
+    commit (this peer and those that confirmed) are a quorum of its holders:
+    only then does every later quorum, and so every eviction, include one of
+    them (`mapapi.quorum`)."""
+    missing = {(c, p) for c, p in unconfirmed}
+    for h in held:
+        applied = [p for p in h.tokens if p == me or (h.chunk, p) not in missing]
+        if not is_quorum(applied, h.tokens):
+            raise CommitUncertain(
+                f"commit {record.id.short} is applied here, but only {len(applied)} of the "
+                f"{len(h.tokens)} holders of chunk {h.chunk.short} confirmed it; if this peer "
+                "is cut off from the others, they decide whether it stays when they evict "
+                "this peer: check `mapctl log` once the swarm answers again"
+            )
+
+
 def _chunks_to_lock(store: ReplicaStore, tx: Transaction) -> list[ChunkId]:
     """Written chunks, plus the chunks a serializable transaction read, in id order."""
     chunks = {c.chunk_id for c in tx.changes}
@@ -174,7 +197,7 @@ async def commit_distributed(
         record = decision.record
         if record is not None:
             try:
-                await replicator.push(
+                unconfirmed = await replicator.push(
                     held,
                     record,
                     decision.revisions,
@@ -188,6 +211,7 @@ async def commit_distributed(
             pushed = True
             if after is not None:
                 await after(record, decision.revisions)
+            _check_confirmed(held, record, unconfirmed, locks.me)
     finally:
         if decision.record is not None and not pushed:
             await replicator.abort(held, decision.record.id)

@@ -173,6 +173,15 @@ class ProtocolError(NetworkError):
     code = 43
 
 
+class CommitUncertain(NetworkError):
+    """A commit was applied at its writer, but too few holders confirmed it to
+    know that it lasts: if the writer is cut off from the others, they decide
+    when they evict it (see docs/guarantees.md, Failures)."""
+
+    retriable = False
+    code = 44
+
+
 class SwarmError(MapError):
     """A problem with swarm membership."""
 

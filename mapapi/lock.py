@@ -7,12 +7,20 @@ waiting writers (no busy retry), and leases. A grant carries a fencing token
 (the holder's lock epoch for the chunk); commit and unlock messages must carry
 it, and a stale token is refused. A lease not renewed by its deadline expires,
 so a crashed writer cannot freeze the chunk. Time is a parameter (`now`).
+
+A lease under which a commit batch is staged here is *pinned*: it does not
+expire, because the writer may already have applied the commit elsewhere, and
+letting another writer in would let this replica go on without it. A pinned
+lease past its deadline is *overdue*: the holder asks the writer how the
+commit ended (`mapapi.recovery`), or the writer's eviction settles it and
+`preempt` takes the lock from the dead writer.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
+from collections.abc import Collection
+from dataclasses import dataclass, field, replace
 
 from mapapi.errors import LockNotHeld
 from mapapi.ids import PeerId
@@ -22,11 +30,17 @@ DEFAULT_LEASE = 5.0
 
 @dataclass(frozen=True, slots=True)
 class Grant:
-    """A write lease: who holds it, its fencing token and when it expires."""
+    """A write lease: who holds it, its fencing token and when it expires
+    (unless `pinned` by a staged commit batch)."""
 
     writer: PeerId
     token: int
     expires: float
+    pinned: bool = False
+
+    def overdue(self, now: float) -> bool:
+        """A pinned lease past its deadline: its commit's outcome is in doubt here."""
+        return self.pinned and self.expires <= now
 
 
 @dataclass
@@ -50,7 +64,7 @@ class ChunkLock:
         """
         self.expire(now)
         if self.grant is not None and self.grant.writer == writer:
-            self.grant = Grant(writer, self.grant.token, now + self.lease)
+            self.grant = replace(self.grant, expires=now + self.lease)
             return self.grant
         if writer not in self.queue:
             self.queue.append(writer)
@@ -75,8 +89,28 @@ class ChunkLock:
         """Extend a lease by `lease` seconds from `now`."""
         self.check(writer, token, now)
         assert self.grant is not None
-        self.grant = Grant(writer, token, now + self.lease)
+        self.grant = replace(self.grant, expires=now + self.lease)
         return self.grant
+
+    def pin(self, writer: PeerId, token: int, now: float) -> None:
+        """Keep the lease from expiring: a batch of the writer's commit is staged.
+
+        Raises:
+            LockNotHeld: `writer` does not hold the lock under `token`.
+        """
+        self.check(writer, token, now)
+        assert self.grant is not None
+        self.grant = replace(self.grant, pinned=True)
+
+    def preempt(self, writers: Collection[PeerId], now: float) -> Grant | None:
+        """Take the lock from `writers` (declared dead), pinned or not, and drop
+        their queued requests; returns the grant made to the next in line."""
+        for writer in writers:
+            self.cancel(writer)
+        if self.grant is not None and self.grant.writer in writers:
+            self.grant = None
+            return self._promote(now)
+        return None
 
     def check(self, writer: PeerId, token: int, now: float) -> None:
         """Refuse a message from a writer whose lease is gone or stale.
@@ -93,8 +127,9 @@ class ChunkLock:
             )
 
     def expire(self, now: float) -> Grant | None:
-        """Drop an expired lease; returns the grant made to the next in line."""
-        if self.grant is not None and self.grant.expires <= now:
+        """Drop an expired lease (never a pinned one); returns the grant made to
+        the next in line."""
+        if self.grant is not None and not self.grant.pinned and self.grant.expires <= now:
             self.grant = None
             return self._promote(now)
         return None

@@ -13,10 +13,10 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
-from mapapi.errors import LockNotHeld, LockTimeout, MapError
+from mapapi.errors import LockNotHeld, LockTimeout, MapError, PeerUnavailable
 from mapapi.ids import ChunkId, PeerId
 from mapapi.lock import Grant, LockTable
 from mapapi.membership import Members
@@ -50,6 +50,10 @@ class LockService:
         self.rpc = rpc
         # Who may ask for a chunk's lock (the swarm admits its holders only).
         self.admit: Callable[[ChunkId, PeerId], None] | None = None
+        # Whether a holder is believed down (its requests fail fast instead of
+        # waiting out their deadline), and who settles an overdue pinned lease.
+        self.is_down: Callable[[PeerId], bool] = lambda peer: False
+        self.on_overdue: Callable[[ChunkId, Grant], None] | None = None
         self.members = members
         self.table = LockTable(lease)
         self.lock_timeout = lock_timeout
@@ -82,9 +86,10 @@ class LockService:
         if timer is not None:
             timer.cancel()
         grant = self.table[chunk].grant
-        if grant is not None and not self._closed:
+        now = time.monotonic()
+        if grant is not None and not grant.overdue(now) and not self._closed:
             loop = asyncio.get_running_loop()
-            delay = max(0.0, grant.expires - time.monotonic())
+            delay = max(0.0, grant.expires - now)
             self._timers[chunk] = loop.call_later(delay, self._expire_soon, chunk)
 
     async def _notify(self, chunk: ChunkId) -> None:
@@ -106,7 +111,11 @@ class LockService:
     def _expire_soon(self, chunk: ChunkId) -> None:
         """Timer callback: drop the lease if it ran out, and wake the waiters."""
         self._timers.pop(chunk, None)
-        self.table[chunk].expire(time.monotonic())
+        lock = self.table[chunk]
+        now = time.monotonic()
+        lock.expire(now)
+        if lock.grant is not None and lock.grant.overdue(now) and self.on_overdue is not None:
+            self.on_overdue(chunk, lock.grant)
         self._notify_soon(chunk)
 
     async def grant_local(self, chunk: ChunkId, writer: PeerId, within: float) -> Grant:
@@ -165,6 +174,16 @@ class LockService:
             lock.release(writer, token, time.monotonic())
         await self._notify(chunk)
 
+    def pin(self, chunk: ChunkId, writer: PeerId, token: int) -> None:
+        """Pin `writer`'s lease: a batch of its commit is staged here (LockNotHeld
+        if the lease is not current)."""
+        self.table[chunk].pin(writer, token, time.monotonic())
+
+    async def preempt(self, chunk: ChunkId, writers: Collection[PeerId]) -> None:
+        """Take the chunk's lock from dead `writers` and drop their requests."""
+        self.table[chunk].preempt(writers, time.monotonic())
+        await self._notify(chunk)
+
     def check(self, chunk: ChunkId, writer: PeerId, token: int) -> None:
         """Refuse a commit message whose lease is not current (LockNotHeld)."""
         self.table[chunk].check(writer, token, time.monotonic())
@@ -203,6 +222,11 @@ class LockService:
     async def _acquire_one(self, chunk: ChunkId, holder: PeerId) -> int:
         if holder == self.me:
             return (await self.grant_local(chunk, self.me, self.lock_timeout)).token
+        if self.is_down(holder):
+            raise PeerUnavailable(
+                f"holder {holder.short} of chunk {chunk.short} does not answer; the other "
+                "holders evict it if they are a majority (then retry), or wait for it"
+            )
         reply = await self.rpc.request(
             self.members.address(holder),
             LockRequest(chunk),
@@ -250,12 +274,7 @@ class LockService:
             LockTimeout, NetworkError: a holder did not grant; nothing stays held.
             Whatever `precheck` raises.
         """
-        turn = self._local_writers.setdefault(chunk, asyncio.Lock())
-        try:
-            async with asyncio.timeout(self.lock_timeout):
-                await turn.acquire()
-        except TimeoutError:
-            raise LockTimeout(f"chunk {chunk.short}: another local writer kept it") from None
+        await self.take_turn(chunk)
         held = Held(chunk)
         ordered = sorted(set(holders))
         asked: Sequence[PeerId] = ordered[:1]  # where a request of ours may still wait
@@ -292,6 +311,25 @@ class LockService:
             self._renew(held), name=f"renew lock {chunk.short}"
         )
         return held
+
+    async def take_turn(self, chunk: ChunkId) -> None:
+        """Wait until no other writer of this peer works on `chunk` (the lock
+        knows writers by peer id, so this peer's own writers take turns here);
+        `end_turn` lets the next one in.
+
+        Raises:
+            LockTimeout: another local writer kept the chunk for `lock_timeout`.
+        """
+        turn = self._local_writers.setdefault(chunk, asyncio.Lock())
+        try:
+            async with asyncio.timeout(self.lock_timeout):
+                await turn.acquire()
+        except TimeoutError:
+            raise LockTimeout(f"chunk {chunk.short}: another local writer kept it") from None
+
+    def end_turn(self, chunk: ChunkId) -> None:
+        """Let the next local writer of `chunk` in (after `take_turn`)."""
+        self._local_writers[chunk].release()
 
     async def _acquire_rest(self, held: Held, rest: Sequence[PeerId]) -> MapError | None:
         """Ask every holder but the arbiter in parallel; their tokens go into
@@ -349,7 +387,7 @@ class LockService:
             await self.stop_renewing(held)
             await self._unlock_all(held, withdraw)
         finally:
-            self._local_writers[held.chunk].release()
+            self.end_turn(held.chunk)
 
     async def _unlock_all(self, held: Held, withdraw: Sequence[PeerId]) -> None:
         targets = {h: held.tokens.get(h, 0) for h in (*withdraw, *held.tokens)}

@@ -32,6 +32,7 @@ from mapapi.triggers import Callback, Triggers
 if TYPE_CHECKING:
     from google.protobuf.message import Message
 
+    from mapapi.liveness import LivenessOptions
     from mapapi.membership import MemberState
     from mapapi.merge import MergePolicy
     from mapapi.net.messages import ChunkSummary, Member
@@ -118,6 +119,7 @@ class Peer:
         lease: float = 5.0,
         shaper: Shaper | None = None,
         chord: ChordOptions | None = None,
+        liveness: LivenessOptions | None = None,
     ) -> str:
         """Put this peer on the network; returns the address others join through.
 
@@ -128,6 +130,8 @@ class Peer:
             chord: periods and timeouts of the lookup ring and the time-to-live
                 of holder registrations (`mapapi.swarm.ChordOptions`; the
                 defaults suit robots on a wireless network).
+            liveness: heartbeat period and the silences after which a peer is
+                suspected and declared dead (`mapapi.liveness.LivenessOptions`).
         """
         from mapapi.swarm import Swarm  # the network stack loads only when needed
 
@@ -143,6 +147,7 @@ class Peer:
             chord=chord,
             places=self.places,
             grid=self.grid,
+            liveness=liveness,
         )
         address = await swarm.start(listen)
         swarm.replicator.applied_hooks.append(self.triggers.applied)

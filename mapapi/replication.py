@@ -15,8 +15,10 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from mapapi import faults
 from mapapi.dht.announce import Announcements, Entry
 from mapapi.dht.ring import chunk_key
 from mapapi.errors import (
@@ -78,6 +80,16 @@ def decode_holder(raw: bytes) -> Member:
     return Member(PeerId.from_bytes(raw[:16]), raw[16:].decode())
 
 
+@dataclass
+class Staged:
+    """A commit batch staged at this holder under `writer`'s lease `token`."""
+
+    writer: PeerId
+    token: int
+    record: CommitRecord
+    revisions: list[Revision]
+
+
 class Replicator:
     """Replication of the chunks one peer holds."""
 
@@ -94,7 +106,8 @@ class Replicator:
         self.members = members
         self.locks = locks
         self.store = store
-        self._staged: dict[tuple[ChunkId, CommitId], tuple[CommitRecord, list[Revision]]] = {}
+        self._staged: dict[tuple[ChunkId, CommitId], Staged] = {}
+        self.committing: set[CommitId] = set()  # commits this peer writes, until applied here
         self._incoming: dict[ChunkId, list[ChunkPart]] = {}
         self._wanted: dict[ChunkId, int] = {}  # chunks asked for -> participations waiting
         self.progress: dict[ChunkId, Progress] = {}
@@ -103,7 +116,7 @@ class Replicator:
         self.announced = Announcements(self._holder_entries, holder_ttl, "holder")
         self.places: ChunkPlaces | None = None  # the chunks' boxes, kept current if set
         # called with each commit another peer applies here, in apply order
-        self.applied_hooks: list[Callable[[CommitRecord, list[Revision]], None]] = []
+        self.applied_hooks: list[Callable[[CommitRecord, Sequence[Revision]], None]] = []
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
             (CommitApply, self.rpc_commit_apply),
@@ -137,12 +150,16 @@ class Replicator:
 
     # -- the holder's side of a commit ---------------------------------------------
     def rpc_commit_batch(self, req: Request) -> Ack:
-        """Stage one chunk's revisions of a commit under a current lease."""
+        """Stage one chunk's revisions of a commit under a current lease, which
+        stays pinned until the commit is applied or dropped (see `mapapi.lock`)."""
         body: CommitBatch = req.body
         self.locks.check(body.chunk, req.sender, body.token)
         if any(r.chunk_id != body.chunk for r in body.revisions):
             raise UsageError(f"commit batch for {body.chunk.short} carries revisions of others")
-        self._staged[(body.chunk, body.record.id)] = (body.record, list(body.revisions))
+        self.locks.pin(body.chunk, req.sender, body.token)
+        self._staged[(body.chunk, body.record.id)] = Staged(
+            req.sender, body.token, body.record, list(body.revisions)
+        )
         return Ack()
 
     async def rpc_commit_apply(self, req: Request) -> Ack:
@@ -154,12 +171,7 @@ class Replicator:
             raise LockNotHeld(
                 f"no staged batch {body.commit_id.short} for chunk {body.chunk.short}"
             )
-        record, revisions = staged
-        self.store.apply_commit(record, revisions)
-        if self.places is not None:
-            self.places.applied(revisions)
-        for hook in self.applied_hooks:
-            hook(record, revisions)
+        self.apply_batch(staged.record, staged.revisions)
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 
@@ -170,6 +182,26 @@ class Replicator:
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 
+    def apply_batch(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
+        """Apply another peer's commit to this replica and tell whoever watches."""
+        self.store.apply_commit(record, revisions)
+        if self.places is not None:
+            self.places.applied(revisions)
+        for hook in self.applied_hooks:
+            hook(record, revisions)
+
+    def staged(self, chunk: ChunkId) -> list[Staged]:
+        """The batches staged here for `chunk` and not yet applied or dropped."""
+        return [b for (c, _), b in sorted(self._staged.items()) if c == chunk]
+
+    def unstage(self, chunk: ChunkId, commit_id: CommitId) -> Staged | None:
+        """Take a staged batch out (to apply or drop it); None if there is none."""
+        return self._staged.pop((chunk, commit_id), None)
+
+    def applied_here(self, chunk: ChunkId, commit_id: CommitId) -> bool:
+        """Whether this replica of `chunk` has the commit's revisions."""
+        return any(r.chunk_id == chunk for r in self.store.commit_revisions(commit_id))
+
     # -- the writer's side ---------------------------------------------------------------
     async def push(
         self,
@@ -177,9 +209,16 @@ class Replicator:
         record: CommitRecord,
         revisions: Sequence[Revision],
         apply_locally: Callable[[], None],
-    ) -> None:
+    ) -> list[tuple[ChunkId, PeerId]]:
         """Stage the commit at every other holder, apply it here, then apply it
         there (which releases their locks). One batch per chunk per holder.
+
+        The local apply decides the commit: until then, a holder that asks how
+        it ended hears "pending", and afterwards "applied".
+
+        Returns:
+            The (chunk, holder) pairs that did not confirm the apply (they have
+            the batch staged, and settle it with this peer or the evictor).
 
         Raises:
             MapError: a holder refused or did not answer the batch, or our own
@@ -192,17 +231,23 @@ class Replicator:
         remote = [
             (h, peer, token) for h in held for peer, token in h.tokens.items() if peer != self.me
         ]
-        await _all(
-            self.rpc.request(
-                self.members.address(peer),
-                CommitBatch(h.chunk, token, record, tuple(by_chunk[h.chunk])),
+        self.committing.add(record.id)
+        try:
+            await _all(
+                self.rpc.request(
+                    self.members.address(peer),
+                    CommitBatch(h.chunk, token, record, tuple(by_chunk[h.chunk])),
+                )
+                for h, peer, token in remote
             )
-            for h, peer, token in remote
-        )
-        for h in held:  # our own replica is fenced too: a lapsed lease here stops us
-            if self.me in h.tokens:
-                self.locks.check(h.chunk, self.me, h.tokens[self.me])
-        apply_locally()
+            await faults.reached("commit.staged")
+            for h in held:  # our own replica is fenced too: a lapsed lease here stops us
+                if self.me in h.tokens:
+                    self.locks.check(h.chunk, self.me, h.tokens[self.me])
+            apply_locally()
+        finally:
+            self.committing.discard(record.id)
+        await faults.reached("commit.applied")
         for h in held:  # the apply ends the remote leases: a renewal now would be refused
             await self.locks.stop_renewing(h)
         results = await asyncio.gather(
@@ -212,10 +257,9 @@ class Replicator:
             ),
             return_exceptions=True,
         )
+        unconfirmed = []
         for (h, peer, _), result in zip(remote, results, strict=True):
             if isinstance(result, BaseException):
-                # Applied here and staged there: a holder that lost the apply message
-                # must catch up from another holder (restart recovery, issue 7).
                 log.warning(
                     "holder %s did not confirm commit %s on %s: %s",
                     peer.short,
@@ -223,6 +267,8 @@ class Replicator:
                     h.chunk.short,
                     result,
                 )
+                unconfirmed.append((h.chunk, peer))
+        return unconfirmed
 
     async def abort(self, held: Sequence[Held], commit_id: CommitId) -> None:
         """Tell every other holder to drop a staged batch (their locks are released
@@ -282,7 +328,7 @@ class Replicator:
             part = ChunkPart(chunk, info, members, tuple(piece), records, index, len(pieces))
             await self.rpc.request(address, part, timeout=30.0, expect=Ack)
 
-    def rpc_chunk_part(self, req: Request) -> Ack:
+    async def rpc_chunk_part(self, req: Request) -> Ack:
         """Collect the parts of a chunk; install it atomically with the last one."""
         part: ChunkPart = req.body
         if part.chunk not in self._wanted:
@@ -313,6 +359,13 @@ class Replicator:
         )
         if self.places is not None:
             self.places.forget(part.chunk)  # replaced wholesale
+        # Batches still in doubt here are settled in the state just installed
+        # (taken under the sender's lock, after their writers finished there).
+        stale = self.staged(part.chunk)
+        for batch in stale:
+            self.unstage(part.chunk, batch.record.id)
+        if stale:
+            await self.locks.preempt(part.chunk, {b.writer for b in stale})
         return Ack()
 
     def rpc_holder_change(self, req: Request) -> Ack:

@@ -20,6 +20,7 @@ from mapapi.clock import LamportClock
 from mapapi.dht.chord import ChordNode
 from mapapi.errors import JoinRefused, MapError, UsageError
 from mapapi.ids import PeerId
+from mapapi.liveness import Liveness, LivenessOptions
 from mapapi.lock_client import LockService
 from mapapi.membership import Members
 from mapapi.net.codec import Ping, Pong
@@ -27,6 +28,7 @@ from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
 from mapapi.net.rpc import Request, Rpc
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
+from mapapi.recovery import Recovery
 from mapapi.replication import HOLDER_TTL, Replicator
 from mapapi.spatial import SpatialGrid
 from mapapi.spatial_index import SpatialIndex
@@ -71,6 +73,7 @@ class Swarm:
         chord: ChordOptions | None = None,
         places: ChunkPlaces | None = None,
         grid: SpatialGrid | None = None,
+        liveness: LivenessOptions | None = None,
     ) -> None:
         self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
         self.grid = grid or SpatialGrid()
@@ -93,10 +96,20 @@ class Swarm:
             self.rpc, lambda: self.members.me, store, self.chord_options.holder_ttl
         )
         self.locks.admit = self.replicator.admit
+        self.liveness = Liveness(self.rpc, self.members, store, liveness)
+        self.locks.is_down = self.liveness.is_dead
+        self.recovery = Recovery(
+            self.rpc, self.members, self.locks, store, self.replicator, self.liveness
+        )
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))
-        self.rpc.on_seen = self.members.touch
+        self.rpc.on_seen = self._seen
+
+    def _seen(self, peer: PeerId) -> None:
+        """A message from `peer` arrived: it is alive, and a member is seen now."""
+        self.members.touch(peer)
+        self.liveness.heard(peer)
 
     @property
     def address(self) -> str:
@@ -125,6 +138,7 @@ class Swarm:
             self._chord, self.index, options.holder_ttl, lambda: (self._peer_id, self.address)
         )
         self.subscriptions.start(self._chord, self.grid)
+        self.liveness.start()
         return address
 
     @property
@@ -236,6 +250,8 @@ class Swarm:
     async def close(self) -> None:
         """Stop renewals and the ring's tasks, and close the endpoint (fails
         pending requests)."""
+        await self.liveness.close()
+        await self.recovery.close()
         await self.replicator.close()
         await self.subscriptions.close()
         if self._chord is not None:

@@ -6,6 +6,7 @@ own test suites get them too.
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
@@ -29,6 +30,21 @@ def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, interval: fl
             name = getattr(predicate, "__name__", repr(predicate))
             raise AssertionError(f"timed out after {timeout}s waiting for {name}")
         time.sleep(interval)  # sync-ok: polling another process's state
+
+
+async def until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:
+    """Await until `predicate()` holds, letting the event loop run between checks;
+    fail naming the predicate after `timeout` s.
+
+    For in-process state that changes in background tasks with no event to
+    await (a failure detector's verdict, an eviction at another peer).
+    """
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            name = getattr(predicate, "__name__", repr(predicate))
+            raise AssertionError(f"timed out after {timeout}s waiting for {name}")
+        await asyncio.sleep(0.01)  # sync-ok: polling state that has no event
 
 
 @pytest.fixture

@@ -65,6 +65,8 @@ def _put_element(repeated: Any, element: type, value: Any) -> None:
         repeated.append(_to_pb(element, value))
     elif dataclasses.is_dataclass(element):
         fill(value, repeated.add())
+    elif issubclass(element, Id):
+        repeated.append(value.to_bytes())
     else:
         repeated.append(value)
 
@@ -102,6 +104,8 @@ def _read_value(kind: type, raw: Any) -> Any:
         return storage.commit_record_from_pb(raw)
     if dataclasses.is_dataclass(kind):
         return read(kind, raw)
+    if issubclass(kind, Id):
+        return kind.from_bytes(raw)
     if kind in _SCALARS:
         return raw
     raise TypeError(f"no wire form for {kind!r}")

@@ -321,6 +321,67 @@ class TriggerPush:
     tables: tuple[TableInfo, ...] = ()
 
 
+@dataclass(frozen=True, slots=True)
+class CommitStatusQuery:
+    """How did these commits to `chunk` end at the receiver?"""
+
+    chunk: ChunkId
+    commit_ids: tuple[CommitId, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class CommitStatus:
+    """Of the commits asked about: applied at the receiver, or still being
+    committed by it; any other one was never applied there."""
+
+    applied: tuple[CommitId, ...]
+    pending: tuple[CommitId, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class StagedBatch:
+    """A commit's revisions of one chunk, staged at a holder and not yet applied."""
+
+    record: CommitRecord
+    revisions: tuple[Revision, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class EvictRequest:
+    """Lock `chunk` for the sender, its evictor, taking the lock from `dead`."""
+
+    chunk: ChunkId
+    dead: tuple[PeerId, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class EvictGrant:
+    """The evictor's lease, and every batch staged at the granting holder."""
+
+    chunk: ChunkId
+    token: int
+    staged: tuple[StagedBatch, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class EvictCommit:
+    """Under the evictor's lease: apply `apply`, drop the batches of `drop`,
+    take `dead` out of the holder set, then release the lock."""
+
+    chunk: ChunkId
+    token: int
+    dead: tuple[PeerId, ...]
+    apply: tuple[StagedBatch, ...]
+    drop: tuple[CommitId, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Evicted:
+    """The receiver is no longer a holder of `chunk`: it fetches it again."""
+
+    chunk: ChunkId
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -353,4 +414,10 @@ SWARM_BODIES: dict[str, type] = {
     "bye": Bye,
     "control_call": ControlCall,
     "control_result": ControlResult,
+    "commit_status_query": CommitStatusQuery,
+    "commit_status": CommitStatus,
+    "evict_request": EvictRequest,
+    "evict_grant": EvictGrant,
+    "evict_commit": EvictCommit,
+    "evicted": Evicted,
 }

@@ -71,6 +71,9 @@ class Rpc:
         self._ids = itertools.count(1)
         self._closed = False
         self.on_seen: Callable[[PeerId], None] | None = None  # called for every message
+        # Addresses of peers declared dead (`mapapi.liveness`): requests to them
+        # fail at once instead of waiting out their deadlines, probes excepted.
+        self.down: set[str] = set()
         transport.set_sink(self)
 
     @property
@@ -112,6 +115,7 @@ class Rpc:
         *,
         timeout: float | None = ...,  # noqa: ASYNC109
         expect: type[T],
+        probe: bool = ...,
     ) -> T: ...
 
     @overload
@@ -122,6 +126,7 @@ class Rpc:
         *,
         timeout: float | None = ...,  # noqa: ASYNC109
         expect: None = ...,
+        probe: bool = ...,
     ) -> object: ...
 
     async def request(
@@ -133,6 +138,7 @@ class Rpc:
         # deadline even when the caller sets none (DESIGN §11).
         timeout: float | None = None,  # noqa: ASYNC109
         expect: type[Any] | None = None,
+        probe: bool = False,
     ) -> object:
         """Send `body` to the peer at `address` and return its reply body.
 
@@ -141,6 +147,7 @@ class Rpc:
             body: a registered envelope body, e.g. `Ping()`.
             timeout: seconds to wait; `default_timeout` if None.
             expect: the reply body type; anything else raises ProtocolError.
+            probe: send even to an address in `down` (a heartbeat).
 
         Raises:
             RequestTimeout: no reply before the deadline (retriable).
@@ -150,6 +157,8 @@ class Rpc:
         """
         if self._closed:
             raise PeerUnavailable(f"cannot reach {address}: this peer is closing")
+        if address in self.down and not probe:
+            raise PeerUnavailable(f"{address} is down: it has not answered for a while")
         deadline = self.default_timeout if timeout is None else timeout
         request_id = next(self._ids)
         fut: asyncio.Future[object] = asyncio.get_running_loop().create_future()
@@ -186,10 +195,15 @@ class Rpc:
 
     async def forget(self, address: str) -> None:
         """Fail requests pending at `address` with PeerUnavailable and drop the link."""
+        self.fail_pending(address, f"{address} left before it answered")
+        await self.transport.forget(address)
+
+    def fail_pending(self, address: str, reason: str) -> None:
+        """Fail the requests pending at `address` now with PeerUnavailable(`reason`)
+        (it was declared dead: waiting out their deadlines would only stall)."""
         for peer, fut in list(self._pending.values()):
             if peer == address and not fut.done():
-                fut.set_exception(PeerUnavailable(f"{address} left before it answered"))
-        await self.transport.forget(address)
+                fut.set_exception(PeerUnavailable(reason))
 
     async def close(self) -> None:
         """Cancel running handlers, fail pending requests with PeerUnavailable,

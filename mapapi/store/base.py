@@ -111,6 +111,9 @@ class ReplicaStore(Store, Protocol):
     def holders(self, chunk_id: ChunkId) -> list[PeerId]:
         """The peers that hold a chunk, in id order."""
 
+    def holdings(self) -> dict[ChunkId, list[PeerId]]:
+        """Every chunk's holders, in id order (chunks with a recorded holder set)."""
+
     def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
         """Replace a chunk's holder set."""
 

@@ -181,6 +181,10 @@ class MemoryStore:
         """The peers that hold a chunk, in id order."""
         return sorted(self._holders.get(chunk_id, ()))
 
+    def holdings(self) -> dict[ChunkId, list[PeerId]]:
+        """Every chunk's holders, in id order (chunks with a recorded holder set)."""
+        return {c: sorted(p) for c, p in sorted(self._holders.items()) if p}
+
     def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
         """Replace a chunk's holder set."""
         self._holders[chunk_id] = set(peers)
@@ -211,14 +215,20 @@ class MemoryStore:
         commits: Sequence[CommitRecord],
         holders: Sequence[PeerId],
     ) -> None:
-        """Take in a replica received from a holder."""
+        """Take in a replica received from a holder, replacing what this store had
+        of the chunk (as `SqliteStore.install_chunk`)."""
         with self._lock:
             known = self._tables.get(table)
             if known is not None and known != type_name:
                 raise UsageError(f"table {table!r} holds {known} here but {type_name} in the swarm")
+            records = {c.id: c for c in commits}
+            had = {r.commit_id for r in self.chunk_revisions(chunk_id)}
+            self.drop_chunk(chunk_id)
+            for commit_id in had - set(records):
+                if not self._commits[commit_id][1]:
+                    del self._commits[commit_id]
             self._tables.setdefault(table, type_name)
             self._chunks.setdefault(chunk_id, table)
-            records = {c.id: c for c in commits}
             for revision in revisions:
                 self.apply_commit(records[revision.commit_id], [revision])
             self.set_holders(chunk_id, holders)

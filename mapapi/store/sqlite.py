@@ -409,6 +409,14 @@ class SqliteStore:
         )
         return [PeerId(r[0]) for r in rows]
 
+    def holdings(self) -> dict[ChunkId, list[PeerId]]:
+        """Every chunk's holders, in id order (chunks with a recorded holder set)."""
+        rows = self._con().execute("SELECT chunk_id, peer_id FROM holders ORDER BY 1, 2")
+        found: dict[ChunkId, list[PeerId]] = {}
+        for chunk, peer in rows:
+            found.setdefault(ChunkId(chunk), []).append(PeerId(peer))
+        return found
+
     def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
         """Replace a chunk's holder set."""
         con = self._con()
@@ -456,6 +464,11 @@ class SqliteStore:
     ) -> None:
         """Take in a replica received from a holder, atomically (all or nothing).
 
+        The replica replaces what this store had of the chunk: a revision the
+        holder lacks (a commit the swarm never decided, applied here alone
+        before a crash) goes, and so does the record of a commit left with no
+        revision at all.
+
         Raises:
             UsageError: this repository has a table of that name with another type.
         """
@@ -469,11 +482,23 @@ class SqliteStore:
                 )
             con.execute("INSERT OR IGNORE INTO tables VALUES (?, ?)", (table, type_name))
             con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+            had = [
+                CommitId(r[0])
+                for r in con.execute(
+                    "SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?", (chunk_id,)
+                )
+            ]
+            con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
             by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
             for revision in revisions:
                 by_commit.setdefault(revision.commit_id, []).append(revision)
             for record in commits:
                 self.apply_commit(record, by_commit[record.id])
+            con.executemany(
+                "DELETE FROM commits WHERE id = ? AND NOT EXISTS "
+                "(SELECT 1 FROM revisions WHERE commit_id = ?)",
+                [(c, c) for c in had if c not in by_commit],
+            )
             self.set_holders(chunk_id, holders)
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
