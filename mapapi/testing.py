@@ -32,7 +32,7 @@ def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, interval: fl
         time.sleep(interval)  # sync-ok: polling another process's state
 
 
-async def until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:
+async def until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:  # noqa: ASYNC109
     """Await until `predicate()` holds, letting the event loop run between checks;
     fail naming the predicate after `timeout` s.
 
