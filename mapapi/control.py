@@ -22,6 +22,7 @@ import contextlib
 import json
 import logging
 import os
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from mapapi.clock import LamportClock
@@ -49,6 +50,8 @@ PING_TIMEOUT = 5.0
 """Seconds a client waits for the daemon's first answer before calling it unresponsive."""
 CALL_TIMEOUT = 600.0
 """Seconds one operation may take (participating in a large chunk takes a while)."""
+ALIVE_CHECK = 0.5
+"""Seconds between checks that the daemon still runs while an operation waits."""
 QUERY_TIMEOUT = 5.0
 """Seconds to wait for another peer's list of chunks."""
 MAX_MESSAGE_SIZE = 512 * 1024 * 1024
@@ -133,12 +136,22 @@ class RemoteOperations:
         endpoint: the daemon's control endpoint (its pid file says which).
         who: how errors name the daemon, e.g. "the peer of /maps/a (pid 42)".
         timeout: seconds one operation may take.
+        alive: tells whether the daemon process still runs; checked every
+            `ALIVE_CHECK` seconds while an operation waits, so a daemon that dies
+            (a crash, `kill -9`) fails the call at once rather than at `timeout`.
     """
 
-    def __init__(self, endpoint: str, who: str = "the peer", timeout: float = CALL_TIMEOUT) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        who: str = "the peer",
+        timeout: float = CALL_TIMEOUT,
+        alive: Callable[[], bool] | None = None,
+    ) -> None:
         self.endpoint = endpoint
         self.who = who
         self.timeout = timeout
+        self.alive = alive
         self._context: zmq.asyncio.Context | None = None
         self._rpc: Rpc | None = None
 
@@ -181,8 +194,22 @@ class RemoteOperations:
         """
         rpc = await self._connect()
         call = ControlCall(op, json.dumps(args))
-        result = await rpc.request(self.endpoint, call, timeout=self.timeout, expect=ControlResult)
-        return json.loads(result.json)
+        reply = asyncio.ensure_future(
+            rpc.request(self.endpoint, call, timeout=self.timeout, expect=ControlResult)
+        )
+        try:
+            while not (await asyncio.wait({reply}, timeout=ALIVE_CHECK))[0]:
+                if self.alive is not None and not self.alive():
+                    raise PeerUnavailable(
+                        f"{self.who} stopped while it ran `{op}` (it crashed or was killed); "
+                        "start it again with `mapctl peer start`, then check with `mapctl log` "
+                        "whether the operation took effect"
+                    )
+        finally:
+            if not reply.done():
+                reply.cancel()
+                await asyncio.gather(reply, return_exceptions=True)
+        return json.loads(reply.result().json)
 
     async def close(self) -> None:
         """Close the connection (idempotent)."""

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
+from mapapi import faults, known_peers
 from mapapi.errors import MapError, PeerNotRunning, RequestTimeout, UsageError
 from mapapi.repo import PeerLock, PeerRecord
 
@@ -126,6 +127,7 @@ async def serve(
     from mapapi.ops import Operations
     from mapapi.peer import Peer
 
+    faults.arm_from_env(os.environ)  # failure tests: see mapapi.faults
     stop = stop or asyncio.Event()
     lock = PeerLock.acquire(repo)
     try:
@@ -134,13 +136,18 @@ async def serve(
         ops.on_shutdown = stop.set
         control = ControlServer(ops)
         record: PeerRecord | None = None
+        keeper: asyncio.Task[None] | None = None
         try:
             record = await _go_live(repo, control, listen, join, advertise, lease)
+            keeper = asyncio.get_running_loop().create_task(_keep_members(repo, peer))
             if ready is not None:
                 ready(record)
             await stop.wait()
             log.info("peer %s stopping", peer.id.short)
         finally:
+            if keeper is not None:
+                keeper.cancel()
+                await asyncio.gather(keeper, return_exceptions=True)
             control.stopping = True  # answer "stopping" while the members hear Bye
             await peer.close()
             await control.close()
@@ -158,19 +165,45 @@ async def _go_live(
     advertise: str | None,
     lease: float,
 ) -> PeerRecord:
-    """Start the peer, join, serve the control endpoint, write the pid file."""
+    """Start the peer, join (through `join`, or else the members it knew when it
+    last ran), serve the control endpoint, write the pid file."""
     peer = control.ops.peer
     bound = await peer.start(listen, lease=lease)
     assert peer.swarm is not None
-    address = advertise or advertised_address(bound, join)
+    recalled = [] if join else known_peers.recall(repo)
+    address = advertise or advertised_address(bound, join or recalled)
     if address != bound:
         peer.swarm.advertise(address)
-    await _join_all(peer, join)
+    if join:
+        await _join_all(peer, join)
+    elif recalled:
+        try:
+            await _join_all(peer, recalled)
+        except MapError as exc:  # the swarm may be gone: serve alone, commits say why
+            log.warning("could not rejoin through any member it knew: %s", exc)
     endpoint = await control.start(repo)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
     repo.write_peer_record(record)
     log.info("peer %s serves %s (control %s)", peer.id.short, address, endpoint)
     return record
+
+
+REMEMBER_PERIOD = 2.0
+"""Seconds between checks of the member list the daemon keeps in `.mapapi/`."""
+
+
+async def _keep_members(repo: Repository, peer: Peer) -> None:
+    """Remember the other members' addresses whenever they change (`known_peers`)."""
+    known: set[str] | None = None
+    while True:
+        current = {s.member.address for s in peer.members() if s.member.address}
+        if current and current != known:
+            try:
+                known_peers.remember(repo, current)
+                known = current
+            except OSError as exc:
+                log.warning("could not remember the swarm's members: %s", exc)
+        await asyncio.sleep(REMEMBER_PERIOD)
 
 
 def run(

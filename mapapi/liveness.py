@@ -6,7 +6,7 @@ as a heartbeat (the RPC layer reports each one through `heard`); every
 get a `Ping`, and the detector re-evaluates them all. When a peer is declared
 dead its pending requests fail at once, and the owner's `on_tick` callback
 (`Recovery.tick`) sees the new state; when a dead peer is heard of again,
-`on_back` is called with it.
+`on_back` is called with it; `on_down` is called when one is declared down.
 """
 
 from __future__ import annotations
@@ -66,6 +66,7 @@ class Liveness:
         )
         self.on_tick: Callable[[], None] | None = None
         self.on_back: Callable[[PeerId], None] | None = None
+        self.on_down: Callable[[PeerId], None] | None = None
         self._task: asyncio.Task[None] | None = None
         self._pings: dict[PeerId, asyncio.Task[None]] = {}
 
@@ -91,6 +92,8 @@ class Liveness:
         if member is not None and member.address:
             self.rpc.down.add(member.address)
             self.rpc.fail_pending(member.address, f"peer {peer.short} is down")
+        if self.on_down is not None:
+            self.on_down(peer)
 
     def is_dead(self, peer: PeerId) -> bool:
         """Whether `peer` is declared dead (silent for `dead_after` seconds)."""

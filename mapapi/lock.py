@@ -177,6 +177,10 @@ class LockTable:
             lock = self._locks[chunk] = ChunkLock(self.lease)
         return lock
 
+    def held_by(self, writer: PeerId) -> list[str]:
+        """The chunks whose lock `writer` holds here."""
+        return [c for c, lock in self._locks.items() if lock.grant and lock.grant.writer == writer]
+
     def drop(self, chunk: str) -> None:
         """Forget a chunk's lock (the peer left the chunk)."""
         self._locks.pop(chunk, None)

@@ -131,6 +131,7 @@ class LockService:
             async with asyncio.timeout(within), cond:
                 grant = lock.request(writer, time.monotonic())
                 while grant is None:
+                    self._refuse_behind_the_dead(chunk, writer)
                     await cond.wait()
                     current = lock.grant
                     grant = current if current and current.writer == writer else None
@@ -150,6 +151,23 @@ class LockService:
             raise
         await self._notify(chunk)
         return grant
+
+    def _refuse_behind_the_dead(self, chunk: ChunkId, writer: PeerId) -> None:
+        """Do not queue behind a writer that is down: only its eviction frees the
+        lock, and a writer waiting here while it holds the arbiter's grant would
+        keep the evictor out (raises PeerUnavailable, retriable)."""
+        current = self.table[chunk].grant
+        if current is not None and current.writer != writer and self.is_down(current.writer):
+            raise PeerUnavailable(
+                f"chunk {chunk.short} is locked by {current.writer.short}, which does not "
+                "answer; retry once the other holders evicted it"
+            )
+
+    def writer_down(self, peer: PeerId) -> None:
+        """`peer` was declared down: wake the writers queued behind its locks, which
+        then give up (`_refuse_behind_the_dead`)."""
+        for chunk in self.table.held_by(peer):
+            self._notify_soon(ChunkId(chunk))
 
     def renew_local(self, chunk: ChunkId, writer: PeerId, token: int) -> Grant:
         """Extend `writer`'s current lease here.

@@ -98,6 +98,7 @@ class Swarm:
         self.locks.admit = self.replicator.admit
         self.liveness = Liveness(self.rpc, self.members, store, liveness)
         self.locks.is_down = self.liveness.is_dead
+        self.liveness.on_down = self.locks.writer_down
         self.recovery = Recovery(
             self.rpc, self.members, self.locks, store, self.replicator, self.liveness
         )

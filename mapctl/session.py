@@ -55,7 +55,7 @@ class Session:
                 from mapapi.control import RemoteOperations
 
                 who = f"the peer of {repo.root} (pid {record.pid})"
-                self._ops = RemoteOperations(record.control, who)
+                self._ops = RemoteOperations(record.control, who, alive=repo.peer_locked)
             else:
                 from mapapi.ops import Operations
                 from mapapi.peer import Peer

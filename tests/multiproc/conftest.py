@@ -73,7 +73,11 @@ class Daemons:
         self.root = root
         self.repos: list[Path] = []
 
-    def start(self, name: str, join: str | None = None) -> Daemon:
+    def start(
+        self, name: str, join: str | None = None, env: dict[str, str] | None = None
+    ) -> Daemon:
+        """`init` a repository `name` and start its daemon (joined through `join`;
+        `env` adds to the daemon's environment, e.g. MAPAPI_FAULTS)."""
         repo = self.root / name
         subprocess.run(
             [MAPCTL, "init", str(repo), "--name", name],
@@ -82,8 +86,26 @@ class Daemons:
             timeout=COMMAND_TIMEOUT,
         )
         self.repos.append(repo)
+        return self.restart(repo, join, env)
+
+    def restart(
+        self, repo: Path, join: str | None = None, env: dict[str, str] | None = None
+    ) -> Daemon:
+        """Start the daemon of an existing repository (without `join`, it rejoins
+        through the members it remembers)."""
         args = ["peer", "start", "--detach", "--json", *(["--join", join] if join else [])]
-        info = json.loads(mapctl(repo, *args))
+        done = subprocess.run(
+            [MAPCTL, "-C", str(repo), *args],
+            capture_output=True,
+            text=True,
+            timeout=COMMAND_TIMEOUT,
+            check=False,
+            env={**os.environ, **(env or {})},
+        )
+        assert done.returncode == 0, (
+            f"peer start in {repo.name} exited {done.returncode}: {done.stderr}"
+        )
+        info = json.loads(done.stdout)
         assert set(info) == {"id", "address", "join"}
         return Daemon(repo, info["id"], info["address"], info["join"])
 
