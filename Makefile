@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: test demo proto lint bench bench-swarm install clean
+.PHONY: test demo tour proto lint bench bench-swarm install clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,9 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 demo: $(STAMP)
+	$(VENV)/bin/mapctl demo
+
+tour: $(STAMP)
 	bash scripts/tour.sh
 
 proto: $(STAMP)

@@ -19,6 +19,7 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
@@ -237,6 +238,25 @@ def run(
 
 
 # -- controlling a daemon from another process ------------------------------------
+def daemon_command(
+    repo: Repository,
+    listen: str = "tcp://127.0.0.1:0",
+    joins: Sequence[str] = (),
+    advertise: str | None = None,
+    verbose: bool = False,
+) -> list[str]:
+    """The command a detached daemon of `repo` runs: `mapctl peer start` in the
+    foreground, under this Python (for `spawn_detached`)."""
+    argv = [sys.executable, "-m", "mapctl", "-C", str(repo.root)]
+    argv += ["-v"] if verbose else []
+    argv += ["peer", "start", "--listen", listen]
+    for address in joins:
+        argv += ["--join", address]
+    if advertise:
+        argv += ["--advertise", advertise]
+    return argv
+
+
 def _log_tail(repo: Repository) -> str:
     try:
         lines = repo.log_path.read_text(encoding="utf-8", errors="replace").splitlines()

@@ -22,6 +22,7 @@ from mapapi.history import change_kind
 from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.maps.operations import MapOperations
 from mapapi.transaction import Op
+from mapapi.transfer_ops import TransferOperations
 from mapapi.watch_ops import WatchOperations
 from mapapi.workspace import Workspace
 
@@ -37,7 +38,7 @@ Json = Any
 _ADDRESS = re.compile(r"tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d+|ipc://\S+")
 
 
-class Operations(WatchOperations, MapOperations):
+class Operations(WatchOperations, MapOperations, TransferOperations):
     """The CLI's operations over one peer (see the module docstring)."""
 
     def __init__(self, peer: Peer) -> None:
@@ -448,31 +449,6 @@ class Operations(WatchOperations, MapOperations):
                 entry = found.setdefault(c.chunk, {"id": c.chunk, "table": c.table, "holders": []})
                 entry["holders"].append(member)
         return {"chunks": [found[k] for k in sorted(found)]}
-
-    async def query_bbox(self, bbox: list[float], table: str | None = None) -> Json:
-        """The chunks (and the missions they hold) whose box overlaps `bbox`
-        (xmin, ymin, zmin, xmax, ymax, zmax), with their holders."""
-        from mapapi.spatial import BBox
-
-        box = BBox.from_tuple(bbox)
-        results = []
-        for found in await self.peer.query_bbox(box, table):
-            ref = found.ref
-            results.append(
-                {
-                    "ref": ref.chunk,
-                    "kind": "mission" if ref.missions else "chunk",
-                    "chunk": ref.chunk,
-                    "table": ref.table,
-                    "missions": list(ref.missions),
-                    "bbox": list(ref.bbox.as_tuple()),
-                    "holders": [
-                        {"id": m.id, "name": m.name, "address": m.address} for m in found.holders
-                    ],
-                    "held": found.held,
-                }
-            )
-        return {"results": results}
 
     async def shutdown(self) -> Json:
         """Stop the peer daemon gracefully (`mapctl peer stop`)."""

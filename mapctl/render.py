@@ -136,3 +136,32 @@ def transfer(text: str) -> Iterator[Callable[[int, int], None]]:
 
     with progress:
         yield show
+
+
+@contextmanager
+def steps() -> Iterator[Callable[[str, str], None]]:
+    """Progress of a command made of steps, on stderr: a spinner with the step
+    running (on a terminal), a line per step done and a dim line per event.
+
+    Yields:
+        `show(kind, text)`: kind "step" (one begins), "done" (it ended) or "info".
+    """
+    console = Console(stderr=True, highlight=False, soft_wrap=True)
+    status = console.status("") if console.is_terminal else None
+
+    def show(kind: str, text: str) -> None:
+        if kind == "step":
+            if status is not None:
+                status.update(Text(text + " ..."))
+            else:
+                console.print(Text(text + " ...", style="bold"))
+        elif kind == "done":
+            console.print(Text("✓ " + text, style="green"))
+        else:
+            console.print(Text("  " + text, style="dim"))
+
+    if status is None:
+        yield show
+        return
+    with status:
+        yield show

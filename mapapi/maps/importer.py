@@ -27,6 +27,7 @@ from mapapi.maps.schema import (
     GRAPH_TABLES,
     MISSIONS,
     VERTICES,
+    Mission,
     edge_to_pb,
     mission_to_pb,
     vertex_to_pb,
@@ -267,6 +268,11 @@ async def _commit_rows(
     try:
         for table in rows:
             chunks[table] = await peer.create_chunk(table)
+        # the row names every chunk of the mission: a peer that finds it by its
+        # box can then load the edges, which the spatial index cannot place
+        mission = rows[MISSIONS][0]
+        assert isinstance(mission, Mission)
+        mission.chunks.update(chunks)
         _stage(tx, rows, chunks, progress)
         started = time.perf_counter()
         record = await tx.commit(f"import mission {name}: {summary}")

@@ -14,7 +14,7 @@ import asyncio
 import fnmatch
 import os
 import time
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -191,10 +191,14 @@ class MapOperations:
         bbox: list[float] | None = None,
         missions: list[str] | None = None,
         up: str = "auto",
+        zoom: bool = False,
+        title: str | None = None,
+        labels: dict[str, str] | None = None,
     ) -> Json:
         """Draw a top-down PNG of the missions named or matching a pattern
         (default: every mission held here, or those overlapping `bbox`), with
-        `bbox` outlined."""
+        `bbox` outlined; `zoom` shows the box and its surroundings only;
+        `labels` maps a mission's name to its legend entry."""
         from mapapi.maps.plot import plot_map
         from mapapi.maps.stored import list_missions, load_cloud, load_graph
 
@@ -208,7 +212,14 @@ class MapOperations:
             else:
                 graphs.append(await load_graph(self.peer, info.name))
         target = _absolute(path)
-        drawn = await asyncio.to_thread(plot_map, target, graphs, clouds, box, up)
+        drawn = await asyncio.to_thread(
+            partial(plot_map, zoom=zoom, title=title, labels=labels),
+            target,
+            graphs,
+            clouds,
+            box,
+            up,
+        )
         return {
             "path": str(target),
             "renderer": drawn.renderer,

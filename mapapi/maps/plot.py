@@ -11,7 +11,7 @@ for everything else, drawn with matplotlib's Agg backend (no display needed).
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 AXES = "xyz"
 MAX_SCATTER = 200_000  # points drawn per picture: more only blurs and slows
 _SEED = 7  # the subsample of a large cloud is the same on every run
+_PALETTE = [f"C{i}" for i in range(10) if i != 7]  # C7 is grey: kept for the edges' web
 
 
 @dataclass(frozen=True)
@@ -68,8 +69,17 @@ def plot_map(
     clouds: Sequence[PointCloud] = (),
     box: BBox | None = None,
     up: str = "auto",
+    *,
+    zoom: bool = False,
+    title: str | None = None,
+    labels: Mapping[str, str] | None = None,
 ) -> PlotResult:
     """Write a top-down PNG of `graphs` and `clouds`, with `box` outlined.
+
+    Args:
+        zoom: show the box and its surroundings only (a query's close-up).
+        title: above the picture (default: the axis it looks down).
+        labels: mission name -> its legend entry (default: its robot).
 
     Raises:
         UsageError: nothing to draw, or a bad `up`.
@@ -79,13 +89,15 @@ def plot_map(
         raise UsageError("nothing to plot: the missions chosen have no vertices or points")
     axis = choose_up(boxes + ([box] if box else []), up)
     names = [g.name for g in graphs] + [c.name for c in clouds]
+    if zoom and box is None:
+        raise UsageError("zoom needs a box to zoom to")
     if clouds and not graphs:
         from mapapi.maps.render3d import render_cloud
 
         points = np.concatenate([c.points for c in clouds])
-        if render_cloud(points, output, box=box, up=axis):
+        if not zoom and render_cloud(points, output, box=box, up=axis):
             return PlotResult("open3d", AXES[axis], names)
-    _draw(output, graphs, clouds, box, axis)
+    _draw(output, graphs, clouds, box, axis, zoom=zoom, title=title, labels=labels or {})
     return PlotResult("matplotlib", AXES[axis], names)
 
 
@@ -95,6 +107,10 @@ def _draw(
     clouds: Sequence[PointCloud],
     box: BBox | None,
     up: int,
+    *,
+    zoom: bool,
+    title: str | None,
+    labels: Mapping[str, str],
 ) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -105,13 +121,16 @@ def _draw(
     u, v = plane_axes(up)
     for cloud in clouds:
         _scatter(ax, figure, cloud, u, v, up)
-    _trajectories(ax, graphs, u, v)
+    _trajectories(ax, graphs, u, v, labels)
     if box is not None:
+        _inside(ax, graphs, box, u, v)
         _box(ax, box, u, v)
     ax.set_xlabel(f"{AXES[u]} [m]")
     ax.set_ylabel(f"{AXES[v]} [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"top-down view (looking down {AXES[up]})")
+    ax.set_aspect("equal", adjustable="box" if zoom else "datalim")
+    if zoom and box is not None:
+        _zoom(ax, box, u, v)
+    ax.set_title(title or f"top-down view (looking down {AXES[up]})")
     ax.grid(True, linewidth=0.3, alpha=0.5)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize="small", markerscale=2)
@@ -130,36 +149,59 @@ def _scatter(ax: Any, figure: Any, cloud: PointCloud, u: int, v: int, up: int) -
     figure.colorbar(drawn, ax=ax, label=f"{cloud.name}: {AXES[up]} [m]", shrink=0.7)
 
 
-def _trajectories(ax: Any, graphs: Sequence[MissionGraph], u: int, v: int) -> None:
+def _colours(graphs: Sequence[MissionGraph]) -> dict[str, str]:
+    """Mission name -> its robot's colour."""
+    robots = sorted({g.robot or g.name for g in graphs})
+    by_robot = {r: _PALETTE[i % len(_PALETTE)] for i, r in enumerate(robots)}
+    return {g.name: by_robot[g.robot or g.name] for g in graphs}
+
+
+def _trajectories(
+    ax: Any, graphs: Sequence[MissionGraph], u: int, v: int, labels: Mapping[str, str]
+) -> None:
     from matplotlib.collections import LineCollection
 
-    robots = sorted({g.robot or g.name for g in graphs})
-    colours = {r: f"C{i % 10}" for i, r in enumerate(robots)}
+    colours = _colours(graphs)
     where = {(g.name, i): (p[u], p[v]) for g in graphs for i, p in g.vertices.items()}
     labelled: set[str] = set()
     links: list[tuple[tuple[float, float], tuple[float, float]]] = []
     for graph in graphs:
-        robot = graph.robot or graph.name
-        colour = colours[robot]
+        colour = colours[graph.name]
         xy = np.array([(p[u], p[v]) for _, p in sorted(graph.vertices.items())])
-        label = None if robot in labelled else robot
-        labelled.add(robot)
+        name = labels.get(graph.name) or graph.robot or graph.name
+        label = None if name in labelled else name
+        labelled.add(name)
         ax.plot(xy[:, 0], xy[:, 1], color=colour, linewidth=1.0, label=label)
         ax.plot(xy[0, 0], xy[0, 1], marker="o", color=colour, markersize=4)
         loops = [(where[e.source], where[e.target]) for e in graph.edges if e.kind is EdgeKind.LOOP]
-        ax.add_collection(LineCollection(loops, colors=colour, linewidths=0.4, alpha=0.35))
+        ax.add_collection(LineCollection(loops, colors=colour, linewidths=0.6, alpha=0.5))
         links += [
             (where[e.source], where[e.target])
             for e in graph.edges
             if e.kind is EdgeKind.INTER_ROBOT and e.source in where and e.target in where
         ]
     if any(g.count(EdgeKind.LOOP) for g in graphs):
-        ax.plot([], [], color="grey", linewidth=0.6, label="loop closures")
+        ax.plot([], [], color="grey", linewidth=0.6, label="loop closures (robot's colour)")
     if links:
         ax.add_collection(
-            LineCollection(links, colors="black", linewidths=0.3, alpha=0.15, linestyles="dashed")
+            LineCollection(links, colors="black", linewidths=0.3, alpha=0.07, linestyles="dashed")
         )
         ax.plot([], [], color="black", linewidth=0.6, linestyle="--", label="inter-robot edges")
+
+
+def _inside(ax: Any, graphs: Sequence[MissionGraph], box: BBox, u: int, v: int) -> None:
+    """Dot the vertices that lie in the box (in all three axes), in their robot's colour."""
+    colours = _colours(graphs)
+    lo, hi = np.array(box.mins), np.array(box.maxs)
+    dotted = False
+    for graph in graphs:
+        xyz = np.array([p[:3] for p in graph.vertices.values()])
+        inside = xyz[np.all((xyz >= lo) & (xyz <= hi), axis=1)]
+        if len(inside):
+            ax.scatter(inside[:, u], inside[:, v], s=9, color=colours[graph.name], zorder=3)
+            dotted = True
+    if dotted:
+        ax.scatter([], [], s=9, color="grey", label="vertices in the box")
 
 
 def _box(ax: Any, box: BBox, u: int, v: int) -> None:
@@ -178,3 +220,11 @@ def _box(ax: Any, box: BBox, u: int, v: int) -> None:
         )
     )
     ax.update_datalim([(lo[u], lo[v]), (hi[u], hi[v])])
+
+
+def _zoom(ax: Any, box: BBox, u: int, v: int, margin: float = 0.25) -> None:
+    """Limit the view to the box and a margin of `margin` times its size around it."""
+    lo, hi = box.mins, box.maxs
+    pad = margin * max(hi[u] - lo[u], hi[v] - lo[v])
+    ax.set_xlim(lo[u] - pad, hi[u] + pad)
+    ax.set_ylim(lo[v] - pad, hi[v] + pad)

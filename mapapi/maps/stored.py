@@ -6,7 +6,8 @@ consistent as of one logical time even while others commit.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+import logging
+from collections.abc import AsyncIterator, Iterable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -29,6 +30,8 @@ from mapapi.spatial import BBox
 if TYPE_CHECKING:
     from mapapi.peer import Peer
     from mapapi.transaction import Transaction
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -113,6 +116,25 @@ async def load_cloud(peer: Peer, mission: str) -> PointCloud:
         row = await _mission_row(peer, tx, mission)
         blocks = await _rows_of(peer, tx, CLOUDS, mission)
     return cloud_from_blocks(mission, row.robot, row.frame, blocks)
+
+
+async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str, ChunkId]]:
+    """Mission name -> {table: chunk} for the missions of `names` held here, as
+    their rows name them (rows written before rows named their chunks name none)."""
+    wanted = set(names)
+    if not wanted or MISSIONS not in peer.tables():
+        return {}
+    async with reading(peer) as tx:
+        rows = [m for m in (await tx.items(MISSIONS)).values() if m.name in wanted]
+    found: dict[str, dict[str, ChunkId]] = {}
+    for row in rows:
+        found[row.name] = {}
+        for table, chunk in row.chunks.items():
+            try:
+                found[row.name][table] = ChunkId(chunk)
+            except ValueError:  # a row written by hand, not by an import
+                log.warning("mission %s names no chunk id for %s: %r", row.name, table, chunk)
+    return found
 
 
 async def list_missions(peer: Peer) -> list[MissionInfo]:

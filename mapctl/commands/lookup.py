@@ -16,7 +16,10 @@ from mapctl.session import Session, json_option, pass_session
 @click.argument("bbox", nargs=6, type=float, metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX")
 @click.option("--table", "-t", help="Only chunks of this table.")
 @click.option(
-    "--load", is_flag=True, help="Participate in every chunk found that is not held here."
+    "--load",
+    is_flag=True,
+    help="Participate in every chunk found that is not held here, and in the other "
+    "chunks (edges) of the missions found.",
 )
 @json_option
 @pass_session
@@ -32,19 +35,25 @@ def query_bbox(
     The box is in metres, in the map frame. Off the network only the chunks
     held here are searched; with a running peer the swarm's spatial index is.
     A box partly outside the index's bounds is clamped; one fully outside
-    matches nothing.
+    matches nothing. With --json, --load adds "loaded": the chunks fetched.
     """
     from mapctl import render
-    from mapctl.commands.peer import participate_with_progress
 
-    info: dict[str, Any] = session.call("query_bbox", bbox=list(bbox), table=table)
-    missing = [r["chunk"] for r in info["results"] if not r["held"]] if load else []
-    for number, chunk in enumerate(missing, 1):
+    args = {"bbox": list(bbox), "table": table}
+    if load:
+        with render.transfer("loading the chunks in the box") as show:
+            info: dict[str, Any] = session.call_with_progress(
+                "load_bbox",
+                args,
+                ("load_progress", args),
+                lambda state: show(state["loaded"], state["of"]),
+            )
         if not as_json:
-            render.note(f"loading {number}/{len(missing)}: chunk {chunk}")
-        participate_with_progress(session, chunk)
-    if missing:  # list them as held now, with every holder
-        info = session.call("query_bbox", bbox=list(bbox), table=table)
+            for c in info["loaded"]:
+                items = f"{c['items']} item{'' if c['items'] == 1 else 's'}"
+                render.note(f"loaded chunk {c['chunk']} ({c['table']}, {items})")
+    else:
+        info = session.call("query_bbox", **args)
     results = info["results"]
     if as_json:
         render.emit_json(info)

@@ -169,6 +169,8 @@ def missions(session: Session, swarm: bool, as_json: bool) -> None:
     show_default=True,
     help="The axis to look down (auto: the one along which the map is thinnest).",
 )
+@click.option("--zoom", is_flag=True, help="Show the --bbox box and its surroundings only.")
+@click.option("--title", help="The picture's title (default: the axis it looks down).")
 @_output_option("The PNG to write.")
 @json_option
 @pass_session
@@ -177,11 +179,14 @@ def plot(
     bbox: tuple[float, ...] | None,
     names: tuple[str, ...],
     up: str,
+    zoom: bool,
+    title: str | None,
     output: Path,
     as_json: bool,
 ) -> None:
     """Draw a top-down PNG of missions: trajectories coloured per robot, loop
-    closures, inter-robot edges, point clouds and the query box.
+    closures, inter-robot edges, point clouds and the query box (with the
+    vertices inside it dotted).
 
     Point clouds alone are rendered by open3d offscreen where a renderer works,
     else (and with graphs) drawn with matplotlib.
@@ -194,6 +199,8 @@ def plot(
         bbox=list(bbox) if bbox else None,
         missions=list(names) or None,
         up=up,
+        zoom=zoom,
+        title=title,
     )
     if as_json:
         render.emit_json(info)

@@ -27,20 +27,6 @@ def _repo(session: Session) -> Repository:
     return Repository.find(session.path)
 
 
-def _start_argv(
-    repo: Repository, listen: str, joins: tuple[str, ...], advertise: str | None, verbose: bool
-) -> list[str]:
-    """The command a detached daemon runs: this CLI's `peer start` in the foreground."""
-    argv = [sys.executable, "-m", "mapctl", "-C", str(repo.root)]
-    argv += ["-v"] if verbose else []
-    argv += ["peer", "start", "--listen", listen]
-    for address in joins:
-        argv += ["--join", address]
-    if advertise:
-        argv += ["--advertise", advertise]
-    return argv
-
-
 def _announce(record: PeerRecord, as_json: bool) -> None:
     """Print what scripts read from `peer start`: the address, or its JSON."""
     from mapctl import render
@@ -92,7 +78,7 @@ def peer_start(
     for address in (listen, *joins, *([advertise] if advertise else [])):
         check_address(address)
     if detach:
-        argv = _start_argv(repo, listen, joins, advertise, session.verbose)
+        argv = daemon.daemon_command(repo, listen, joins, advertise, session.verbose)
         record = daemon.spawn_detached(repo, argv)
         _announce(record, as_json)
         render.note(
@@ -297,7 +283,7 @@ def clone(
     existed = directory.exists()
     repo = Repository.init(directory, name)
     try:
-        argv = _start_argv(repo, listen, (address,), None, session.verbose)
+        argv = daemon.daemon_command(repo, listen, (address,), None, session.verbose)
         record = daemon.spawn_detached(repo, argv)
     except BaseException:
         import shutil

@@ -129,6 +129,7 @@ class TestQueryBbox:
         mapctl, hall, _ = rooms
         found = mapctl.json("query-bbox", "0", "0", "0", "1", "1", "1", "--load")
         assert [(r["chunk"], r["held"]) for r in found["results"]] == [(hall, True)]
+        assert found["loaded"] == []
 
 
 class TestInitSpatialIndex:

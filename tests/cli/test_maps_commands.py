@@ -187,6 +187,16 @@ class TestPlot:
         info = intel.json("plot", "--bbox", *box, "-o", str(tmp_path / "t.png"))
         assert info["missions"] == ["robot5", "robot6"]
 
+    def test_zoom_and_title(self, intel: Mapctl, tmp_path: Path) -> None:
+        out = tmp_path / "zoom.png"
+        box = ["-5", "-10", "-1", "5", "0", "1"]
+        info = intel.json("plot", "--bbox", *box, "--zoom", "--title", "a close-up", "-o", str(out))
+        assert (info["missions"], info["renderer"]) == (["intel"], "matplotlib")
+        assert out.read_bytes().startswith(PNG)
+        alone = intel.main("plot", "--zoom", "-o", str(tmp_path / "x.png"))
+        assert alone.code == EXIT_USAGE
+        assert "zoom needs a box" in alone.err
+
     def test_nothing_to_draw_and_unknown_missions_exit_2(
         self, mapctl: Mapctl, tmp_path: Path
     ) -> None:

@@ -97,3 +97,36 @@ async def test_missions_with_swarm_lists_what_others_hold(make_peer: MakePeer) -
     assert (intel["name"], intel["held"], intel["vertices"]) == ("intel", False, None)
     assert intel["holders"] == [{"id": a.id, "name": a.name, "address": a.address}]
     assert (room["name"], room["held"], room["holders"][0]["id"]) == ("room_scan1", True, b.id)
+
+
+async def test_load_bbox_loads_every_chunk_of_the_missions_found(make_peer: MakePeer) -> None:
+    a, b = await lookup_swarm(make_peer, 2)
+    result = await import_graph(a, read_g2o(INTEL), robot="hahnel")
+    ops = Operations(b)
+
+    loaded = await ops.load_bbox([10, -20, -1, 11, -19, 1])
+
+    # the box finds the row and the vertices; the row names the edges' chunk
+    assert sorted((c["table"], c["chunk"]) for c in loaded["loaded"]) == sorted(
+        (table, chunk) for table, chunk in result.chunks.items()
+    )
+    assert {r["table"]: r["held"] for r in loaded["results"]} == {MISSIONS: True, VERTICES: True}
+    (info,) = await list_missions(b)
+    assert (info.vertices, info.edges) == (1_728, 2_512)
+    assert await ops.load_progress([10, -20, -1, 11, -19, 1]) == {"loaded": 0, "of": 0}
+    again = await ops.load_bbox([10, -20, -1, 11, -19, 1])
+    assert again["loaded"] == []
+
+
+async def test_traffic_counts_what_the_transport_moved(make_peer: MakePeer) -> None:
+    a, b = await lookup_swarm(make_peer, 2)
+    await import_graph(a, read_g2o(INTEL))
+    before = await Operations(b).traffic()
+
+    await Operations(b).load_bbox([-100, -100, -1, 100, 100, 1])
+
+    after = await Operations(b).traffic()
+    received = after["received"]["bytes"] - before["received"]["bytes"]
+    assert received > 2_512 * 21 * 8  # at least the edges' information matrices
+    assert sum(after["received_by_type"].values()) == after["received"]["bytes"]
+    assert after["sent"]["messages"] > before["sent"]["messages"]

@@ -23,6 +23,7 @@ from mapapi.maps import (
     read_kimera,
 )
 from mapapi.maps.se3 import IDENTITY
+from mapapi.maps.stored import mission_chunks
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
@@ -87,6 +88,17 @@ class TestImportGraph:
         tx = peer.begin()
         kinds = [e.kind for e in (await tx.items(EDGES)).values()]
         assert kinds.count(EdgeKind.INTER_ROBOT.value) == 3_548
+
+    async def test_the_mission_row_names_the_missions_chunks(self) -> None:
+        peer = Peer.in_memory()
+        intel = await import_graph(peer, read_g2o(INTEL))
+        tunnels = await import_graphs(peer, read_kimera(SAMPLES / "kimera_multi_tunnels_8robots"))
+
+        named = await mission_chunks(peer, ["intel", "robot3", "nope"])
+
+        assert named == {"intel": intel.chunks, "robot3": tunnels[3].chunks}
+        assert sorted(named["intel"]) == [EDGES, MISSIONS, VERTICES]
+        assert await mission_chunks(peer, []) == {}
 
     async def test_renaming_moves_the_missions_own_edge_ends(self) -> None:
         peer = Peer.in_memory()

@@ -95,3 +95,55 @@ class TestPlot:
         monkeypatch.setenv("MAPAPI_RENDER3D", "0")
         monkeypatch.setattr(render3d.subprocess, "run", None)  # never called
         assert plot_map(tmp_path / "c.png", clouds=[cloud()]).renderer == "matplotlib"
+
+
+class TestZoomLabelsTitle:
+    @pytest.fixture
+    def saved(self, monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+        """The figures plot_map saves (each also written as usual)."""
+        from matplotlib.figure import Figure
+
+        figures: list[Any] = []
+        save = Figure.savefig
+
+        def keep(figure: Any, *args: Any, **kwargs: Any) -> None:
+            figures.append(figure)
+            save(figure, *args, **kwargs)
+
+        monkeypatch.setattr(Figure, "savefig", keep)
+        return figures
+
+    def test_zoom_shows_the_box_and_a_margin_only(self, tmp_path: Path, saved: list[Any]) -> None:
+        graphs = read_kimera(SAMPLES / "kimera_multi_tunnels_8robots")
+        box = BBox(-15, -15, -15, 15, 15, 15)
+
+        plot_map(tmp_path / "zoom.png", graphs, box=box, zoom=True)
+
+        (ax,) = saved[0].axes
+        assert ax.get_xlim() == pytest.approx((-22.5, 22.5))  # looking down y: z across
+        assert ax.get_ylim() == pytest.approx((-22.5, 22.5))
+        assert "vertices in the box" in ax.get_legend_handles_labels()[1]
+
+    def test_labels_name_the_legend_and_the_title_is_kept(
+        self, tmp_path: Path, saved: list[Any]
+    ) -> None:
+        graphs = read_kimera(SAMPLES / "kimera_multi_tunnels_8robots")[:2]
+        labels = {"robot0": "robot0 (from alpha)"}
+
+        plot_map(tmp_path / "labels.png", graphs, labels=labels, title="two robots")
+
+        (ax,) = saved[0].axes
+        assert ax.get_title() == "two robots"
+        assert ax.get_legend_handles_labels()[1][:2] == ["robot0 (from alpha)", "robot1"]
+
+    def test_zoom_needs_a_box(self, tmp_path: Path) -> None:
+        with pytest.raises(UsageError, match="zoom needs a box"):
+            plot_map(
+                tmp_path / "x.png", [read_g2o(SAMPLES / "pose_graphs" / "intel.g2o")], zoom=True
+            )
+
+    def test_a_zoomed_cloud_is_drawn_with_matplotlib(self, tmp_path: Path) -> None:
+        drawn = plot_map(
+            tmp_path / "c.png", clouds=[cloud()], box=BBox(0, 0, 0, 2, 2, 1), zoom=True
+        )
+        assert drawn.renderer == "matplotlib"

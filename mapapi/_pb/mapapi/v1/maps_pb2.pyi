@@ -52,16 +52,25 @@ class Pose3(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ..., qx: _Optional[float] = ..., qy: _Optional[float] = ..., qz: _Optional[float] = ..., qw: _Optional[float] = ...) -> None: ...
 
 class Mission(_message.Message):
-    __slots__ = ("name", "robot", "frame", "bbox")
+    __slots__ = ("name", "robot", "frame", "bbox", "chunks")
+    class ChunksEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: str
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[str] = ...) -> None: ...
     NAME_FIELD_NUMBER: _ClassVar[int]
     ROBOT_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     BBOX_FIELD_NUMBER: _ClassVar[int]
+    CHUNKS_FIELD_NUMBER: _ClassVar[int]
     name: str
     robot: str
     frame: str
     bbox: Box3
-    def __init__(self, name: _Optional[str] = ..., robot: _Optional[str] = ..., frame: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ...) -> None: ...
+    chunks: _containers.ScalarMap[str, str]
+    def __init__(self, name: _Optional[str] = ..., robot: _Optional[str] = ..., frame: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., chunks: _Optional[_Mapping[str, str]] = ...) -> None: ...
 
 class VertexRef(_message.Message):
     __slots__ = ("mission", "index")
