@@ -126,6 +126,7 @@ class ChordNode:
         self._periods = (stabilize_period, fix_fingers_period, check_predecessor_period)
         self._suspects: dict[int, float] = {}  # key -> until (real time): found dead
         self._replicated: set[Node] = set()
+        self._replicated_for: Node | None = None  # the predecessor when last replicated
         self._stabilizing = asyncio.Lock()
         self._fixing = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
@@ -143,7 +144,7 @@ class ChordNode:
             ChordStore: self.rpc_store,
         }
         for body, handler in self._handlers.items():
-            rpc.register(body, handler)
+            rpc.register(body, self._proof_of_life(handler))
 
     @property
     def key(self) -> int:
@@ -426,6 +427,13 @@ class ChordNode:
                 log.debug("replica %s missed an update: %s", node.address, result)
 
     async def _replicate_to_new_successors(self) -> None:
+        """Copy the keys this node owns to successors that may lack them: new ones
+        in the list, or all of them once the predecessor changed (a crashed
+        predecessor's keys are ours now, and its successors beyond ours never had
+        them), so every key is back at k + 1 nodes after each repair."""
+        if self.predecessor != self._replicated_for:
+            self._replicated = set()
+            self._replicated_for = self.predecessor
         new = [s for s in self.successors if s != self.me and s not in self._replicated]
         self._replicated = set(self.successors)
         entries = self._entries(self._owns)
@@ -433,6 +441,15 @@ class ChordNode:
             await self._replicate(ChordStore(entries), new)
 
     # -- handlers --------------------------------------------------------------------------
+    def _proof_of_life(self, handler: Callable[[Request], Any]) -> Callable[[Request], Any]:
+        """`handler`, after clearing any suspicion of the requesting node: it is alive."""
+
+        def serve(req: Request) -> Any:
+            self._suspects.pop(ring.peer_key(req.sender), None)
+            return handler(req)
+
+        return serve
+
     async def _call(self, node: Node, body: object, expect: type[T]) -> T:
         if node == self.me:  # served locally, as a remote would
             request = Request(_NOBODY, 0, 0, Kind.REQUEST, body)
@@ -442,7 +459,11 @@ class ChordNode:
             assert isinstance(result, expect)
             return result
         self.requests_sent += 1
-        return await self.rpc.request(node.address, body, timeout=self.timeout, expect=expect)
+        reply = await self.rpc.request(node.address, body, timeout=self.timeout, expect=expect)
+        # It answered: a suspicion was wrong (a slow reply timed out before), and
+        # routing around a live node would give some lookups the wrong owner.
+        self._suspects.pop(node.key, None)
+        return reply
 
     def rpc_find_successor(self, req: Request) -> ChordHop:
         """One lookup step: the key's successor, or the next node to ask."""
