@@ -205,7 +205,8 @@ def measure_registration(
 
     Raises:
         UsageError: gtsam is missing, or an unknown mode.
-        RegistrationCheckFailed: not from here; see `check_registration`.
+        RegistrationError: gtsam failed to optimise a job.
+        RingNotStable: a swarm's ring did not converge (a Chord bug).
     """
     require_gtsam()  # before a minute of transfers, not after
     unknown = set(modes) - set(MODES)
