@@ -13,7 +13,7 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e '.[dev,pointcloud]'
+	$(PY) -m pip install --quiet -e '.[dev,pointcloud,registration]'
 	bash scripts/ensure-syslibs.sh
 	touch $(STAMP)
 

@@ -33,10 +33,11 @@ writers' commits whose item lay inside before or after, computed from the
 workload (`check_triggers` turns a difference into an error).
 
 Each (fraction, mode) runs on a fresh swarm of the same seeded peers
-(`settled_peers`) whose Chord rounds and announcement refreshes are parked, so
-the counters hold only what the run itself costs. Bytes are what the
-subscriber's transport received (`mapapi.net.stats`), requests and replies
-alike. Nothing here asserts them; the figures go to docs/benchmarks.md.
+(`mapapi.bench.peers.settled_peers`) whose Chord rounds and announcement
+refreshes are parked, so the counters hold only what the run itself costs.
+Bytes are what the subscriber's transport received (`mapapi.net.stats`),
+requests and replies alike. Nothing here asserts them; the figures go to
+docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -46,21 +47,17 @@ import logging
 import random
 import time
 from collections import Counter
-from collections.abc import AsyncIterator, Sequence
-from contextlib import asynccontextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from mapapi.bench.ring import converge
+from mapapi.bench.peers import received_bytes, settled_peers, stats_of, swarm_of
 from mapapi.bench.trigger_workload import AREA, Update, Workload, item_at, plan_workload
 from mapapi.errors import MapError, UsageError
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.net.stats import Stats
+from mapapi.ids import ChunkId, CommitId, ItemId
 from mapapi.peer import Peer
 from mapapi.spatial import BBox, SpatialGrid
-from mapapi.store import MemoryStore
 from mapapi.subscriptions import Subscription, SubscriptionSpec
-from mapapi.swarm import ChordOptions, Swarm
 
 log = logging.getLogger(__name__)
 
@@ -86,63 +83,9 @@ DEFAULT_COMMITS = 20
 
 TABLE = "landmarks"
 
-STILL = ChordOptions(
-    stabilize=3600.0, fix_fingers=3600.0, check_predecessor=3600.0, holder_ttl=3600.0
-)
-"""The bench peers' Chord options: `settled_peers` settles the ring itself, and
-no periodic round or refresh then falls inside a run."""
-
 
 class TriggersCheckFailed(MapError):
     """A subscriber did not learn exactly the commits inside its region."""
-
-
-# -- peers -------------------------------------------------------------------------------
-
-
-@asynccontextmanager
-async def settled_peers(
-    count: int, rng: random.Random, *, grid: SpatialGrid = GRID, chord: ChordOptions = STILL
-) -> AsyncIterator[list[Peer]]:
-    """`count` in-memory peers on 127.0.0.1, port 0, joined through the first,
-    once their Chord ring matches the sorted-ring oracle (`converge` drives the
-    rounds itself); all closed on exit, whatever happens.
-
-    Args:
-        count: peers.
-        rng: seeds their ids: one seed, one ring.
-        grid: their spatial index.
-        chord: their Chord options (the default parks the periodic rounds).
-
-    Raises:
-        RingNotStable: the ring did not converge (a Chord bug).
-    """
-    peers: list[Peer] = []
-    try:
-        for _ in range(count):
-            peer = Peer(MemoryStore(), PeerId(f"{rng.getrandbits(128):032x}"), grid=grid)
-            peers.append(peer)
-            await peer.start("tcp://127.0.0.1:0", chord=chord)
-            if len(peers) > 1:
-                await peer.join(peers[0].address)
-        await converge([_swarm(p).chord for p in peers], 2 * count + 10)
-        yield peers
-    finally:
-        for peer in reversed(peers):
-            await peer.close()
-
-
-def _swarm(peer: Peer) -> Swarm:
-    assert peer.swarm is not None, "a peer of settled_peers is started"
-    return peer.swarm
-
-
-def _stats(peer: Peer) -> Stats:
-    return _swarm(peer).rpc.transport.stats
-
-
-def _received(peer: Peer) -> int:
-    return sum(t.bytes for t in _stats(peer).received.values())
 
 
 # -- measurement -------------------------------------------------------------------------
@@ -266,16 +209,16 @@ async def _run(
 ) -> dict[str, Any]:
     """One mode on a fresh swarm: its row, but for the figures of `_compare`."""
     writers = len(workload.items)
-    async with settled_peers(count, random.Random(seed)) as peers:
+    async with settled_peers(count, random.Random(seed), grid=GRID) as peers:
         chunks, items, since = await _populate(peers[:writers], workload)
         owners = dict(zip(chunks, peers[:writers], strict=True))
         followers = [_Follower(p, dict(since)) for p in peers[writers : writers + subscribers]]
         for follower in followers:
-            before = _received(follower.peer)
+            before = received_bytes(follower.peer)
             await _set_up(mode, follower, workload.region, chunks)
-            follower.setup_bytes = _received(follower.peer) - before
+            follower.setup_bytes = received_bytes(follower.peer) - before
         for peer in peers:
-            _stats(peer).reset()
+            stats_of(peer).reset()
         expected: list[Learned] = []
         started = time.perf_counter()
         for updates in workload.rounds:
@@ -285,7 +228,7 @@ async def _run(
             for follower in followers:
                 await _observe(mode, follower, workload.region, owners)
                 follower.stale_rounds += Counter(follower.learned) != Counter(expected)
-                follower.by_round.append(_received(follower.peer))
+                follower.by_round.append(received_bytes(follower.peer))
         seconds = time.perf_counter() - started
         row = _row(mode, workload, peers, followers, expected)
     log.info("%s at %g: %s bytes per subscriber", mode, workload.fraction, row["bytes"])
@@ -358,9 +301,9 @@ async def _observe(
             follower.learned.append((event.record.id, tuple(r.item_id for r in event.revisions)))
             follower.revisions += len(event.revisions)
     elif mode == "polling":
-        before = _received(peer)
+        before = received_bytes(peer)
         found = await peer.query_bbox(region, TABLE)
-        follower.query_bytes += _received(peer) - before
+        follower.query_bytes += received_bytes(peer) - before
         for placed in found:
             chunk = placed.ref.chunk
             await peer.participate(chunk)
@@ -373,7 +316,7 @@ async def _observe(
             await peer.leave_chunk(chunk)
     elif mode == "replication":
         for chunk in owners:
-            await _swarm(peer).locks.wait_readable(chunk)  # the round's commits are applied
+            await swarm_of(peer).locks.wait_readable(chunk)  # the round's commits are applied
             follower.revisions += _learn(follower, chunk, region)
 
 
@@ -411,11 +354,11 @@ def _row(
     n = len(followers)
     by_type: Counter[str] = Counter()
     for follower in followers:
-        by_type.update({t: c.bytes for t, c in _stats(follower.peer).received_by_type().items()})
+        by_type.update({t: c.bytes for t, c in stats_of(follower.peer).received_by_type().items()})
     want = Counter(expected)
     commits = sum(len(updates) for updates in workload.rounds)
-    received = sum(_received(f.peer) for f in followers) / n
-    messages = sum(c.messages for f in followers for c in _stats(f.peer).received.values())
+    received = sum(received_bytes(f.peer) for f in followers) / n
+    messages = sum(c.messages for f in followers for c in stats_of(f.peer).received.values())
     return {
         "mode": mode,
         "inside_fraction": workload.fraction,
@@ -435,7 +378,7 @@ def _row(
         "query_bytes": round(sum(f.query_bytes for f in followers) / n, 1),
         "changes": round(sum(len(i) for f in followers for _, i in f.learned) / n, 1),
         "revisions": round(sum(f.revisions for f in followers) / n, 1),
-        "network_bytes": sum(_received(p) for p in peers),
+        "network_bytes": sum(received_bytes(p) for p in peers),
         "missed": sum(sum((want - Counter(f.learned)).values()) for f in followers),
         "extra": sum(sum((Counter(f.learned) - want).values()) for f in followers),
         "stale_rounds": sum(f.stale_rounds for f in followers),

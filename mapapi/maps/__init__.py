@@ -6,8 +6,8 @@ peer; `import_missions` writes parsed missions into a `Peer`, one commit each;
 `stored` reads them back. Importing this package registers the map message
 types (`mapapi.v1.Mission`, ...) for tables. What needs numpy (clouds, and the
 import and read-back that handle them) is loaded on first use, so `mapctl`
-commands that never touch a map start without it; open3d (point-cloud files)
-and matplotlib (plots) are imported only when used.
+commands that never touch a map start without it; open3d (point-cloud files),
+matplotlib (plots) and gtsam (`register_missions`) are imported only when used.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ if TYPE_CHECKING:
         import_graphs,
         import_missions,
     )
+    from mapapi.maps.registration import Registration, linked_missions, register_missions
     from mapapi.maps.stored import MissionInfo, list_missions, load_cloud, load_graph
 
 _LAZY = {
@@ -50,6 +51,9 @@ _LAZY = {
     ),
     **dict.fromkeys(
         ("MissionInfo", "list_missions", "load_cloud", "load_graph"), "mapapi.maps.stored"
+    ),
+    **dict.fromkeys(
+        ("Registration", "linked_missions", "register_missions"), "mapapi.maps.registration"
     ),
 }
 
@@ -76,6 +80,7 @@ __all__ = [
     "MissionGraph",
     "MissionInfo",
     "PointCloud",
+    "Registration",
     "VertexKey",
     "build_rows",
     "chain_odometry",
@@ -84,11 +89,13 @@ __all__ = [
     "import_graph",
     "import_graphs",
     "import_missions",
+    "linked_missions",
     "list_missions",
     "load_cloud",
     "load_graph",
     "parse_g2o",
     "read_g2o",
     "read_kimera",
+    "register_missions",
     "write_g2o",
 ]
