@@ -15,7 +15,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from mapapi.errors import MapError
@@ -67,6 +67,8 @@ class Liveness:
         self.on_tick: Callable[[], None] | None = None
         self.on_back: Callable[[PeerId], None] | None = None
         self.on_down: Callable[[PeerId], None] | None = None
+        # Peers to watch besides the co-holders (those evicted, to see them back).
+        self.also_watch: Callable[[], Iterable[PeerId]] = lambda: ()
         self._task: asyncio.Task[None] | None = None
         self._pings: dict[PeerId, asyncio.Task[None]] = {}
 
@@ -114,7 +116,7 @@ class Liveness:
     def tick(self) -> None:
         """One round: watch the co-holders, re-evaluate them, ping the quiet ones."""
         now = time.monotonic()
-        watched = self.co_holders()
+        watched = self.co_holders() | set(self.also_watch())
         for peer in set(self.detector.watched()) - watched:
             self.detector.unwatch(peer)
         for peer in watched:

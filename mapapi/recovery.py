@@ -85,7 +85,7 @@ class Recovery:
         self.replicator = replicator
         self.liveness = liveness
         self.retry = liveness.options.interval
-        self._tasks: dict[tuple[str, ChunkId], asyncio.Task[None]] = {}
+        self._tasks: dict[tuple[str, ...], asyncio.Task[None]] = {}
         self._evicted: dict[PeerId, set[ChunkId]] = {}
         self._stuck: dict[ChunkId, tuple[PeerId, ...]] = {}  # chunks without a quorum, logged
         self.evictions = 0  # holders evicted by this peer (for tests and benchmarks)
@@ -99,28 +99,30 @@ class Recovery:
         locks.on_overdue = self._overdue
         liveness.on_tick = self.tick
         liveness.on_back = self._back
+        liveness.also_watch = self._evicted.keys
 
     @property
     def me(self) -> PeerId:
         """This peer's id."""
         return self.members.me.id
 
-    def _spawn(self, key: tuple[str, ChunkId], work: Coroutine[Any, Any, None]) -> None:
-        """Run `work` in the background unless the same kind of work on the same
-        chunk runs already."""
+    def _spawn(self, key: tuple[str, ...], work: Coroutine[Any, Any, None]) -> None:
+        """Run `work` in the background unless work under the same key (what it
+        does, to which chunk, for whom) runs already."""
         running = self._tasks.get(key)
         if running is not None and not running.done():
             work.close()
             return
-        task = asyncio.get_running_loop().create_task(work, name=f"{key[0]} {key[1].short}")
+        name = " ".join(key)
+        task = asyncio.get_running_loop().create_task(work, name=name)
         self._tasks[key] = task
-        task.add_done_callback(lambda t: self._finished(key, t))
+        task.add_done_callback(lambda t: self._finished(key, name, t))
 
-    def _finished(self, key: tuple[str, ChunkId], task: asyncio.Task[None]) -> None:
+    def _finished(self, key: tuple[str, ...], name: str, task: asyncio.Task[None]) -> None:
         if self._tasks.get(key) is task:
             del self._tasks[key]
         if not task.cancelled() and task.exception() is not None:
-            log.warning("%s of chunk %s failed: %s", key[0], key[1].short, task.exception())
+            log.warning("%s failed: %s", name, task.exception())
 
     # -- eviction ----------------------------------------------------------------------
     def tick(self) -> None:
@@ -357,7 +359,7 @@ class Recovery:
     # -- evicted peers coming back ----------------------------------------------------------
     def _back(self, peer: PeerId) -> None:
         for chunk in sorted(self._evicted.pop(peer, set())):
-            self._spawn(("tell", chunk), self._tell_evicted(peer, chunk))
+            self._spawn(("tell", chunk, peer), self._tell_evicted(peer, chunk))
 
     async def _tell_evicted(self, peer: PeerId, chunk: ChunkId) -> None:
         try:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import random
 from dataclasses import dataclass
 
 from mapapi.chunk_places import ChunkPlaces
@@ -36,6 +37,9 @@ from mapapi.store.base import ReplicaStore
 from mapapi.subscriptions import Subscriptions
 
 log = logging.getLogger(__name__)
+
+MERGE_ROUNDS = 5
+"""Stabilize periods between two ring-merge steps through a random member."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +110,7 @@ class Swarm:
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))
         self.rpc.on_seen = self._seen
+        self._merging: asyncio.Task[None] | None = None
 
     def _seen(self, peer: PeerId) -> None:
         """A message from `peer` arrived: it is alive, and a member is seen now."""
@@ -140,7 +145,23 @@ class Swarm:
         )
         self.subscriptions.start(self._chord, self.grid)
         self.liveness.start()
+        self._merging = asyncio.get_running_loop().create_task(self._merge_rings(), name="merge")
         return address
+
+    async def _merge_rings(self) -> None:
+        """Now and then, merge this node's ring with a random member's: after a
+        partition heals, each half has repaired into a ring of its own
+        (`ChordNode.merge_through`)."""
+        rng = random.Random()
+        while True:
+            await asyncio.sleep(MERGE_ROUNDS * self.chord_options.stabilize)
+            others = [s.member.address for s in self.members.others() if s.member.address]
+            if others:
+                try:
+                    if await self.chord.merge_through(rng.choice(others)):
+                        log.info("the lookup ring met another one; merging them")
+                except MapError as exc:
+                    log.debug("ring merge step failed: %s", exc)
 
     @property
     def chord(self) -> ChordNode:
@@ -251,6 +272,9 @@ class Swarm:
     async def close(self) -> None:
         """Stop renewals and the ring's tasks, and close the endpoint (fails
         pending requests)."""
+        if self._merging is not None:
+            self._merging.cancel()
+            await asyncio.gather(self._merging, return_exceptions=True)
         await self.liveness.close()
         await self.recovery.close()
         await self.replicator.close()

@@ -201,6 +201,29 @@ class ChordNode:
         self.successors = [successor]
         await self.stabilize_once()
 
+    async def merge_through(self, address: str) -> bool:
+        """Look this node's own key up on the ring of the node at `address`; if that
+        ring has a node between us and our successor, make it our successor.
+        After a partition healed, the two rings the halves repaired into know
+        nothing of each other: this step, run now and then through a random
+        member, joins them into one again, stabilize doing the rest (the
+        repair a joining node gets). Returns whether our successor changed.
+
+        Raises:
+            NetworkError: the member did not answer in time.
+        """
+        found, _ = await self._lookup(self.key, Node(0, address), retry=False)
+        successor = self.successors[0]
+        if found == self.me or found == successor:
+            return False
+        if successor != self.me and not ring.in_interval(
+            found.key, self.key, successor.key, inclusive_right=False
+        ):
+            return False
+        self._suspects.pop(found.key, None)
+        self.successors = [found, *(s for s in self.successors if s != found)][: self._k]
+        return True
+
     async def leave(self) -> None:
         """Leave gracefully: stop the tasks, hand every value to the successor and
         tell the predecessor and successor who replaces this node."""

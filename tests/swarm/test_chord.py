@@ -188,6 +188,31 @@ class TestRing:
                 await nodes[0].next_round()
         await assert_lookups_agree(nodes, keys(10, 1))
 
+    async def test_two_rings_a_partition_left_merge_into_one(self, make_ring: MakeRing) -> None:
+        """Issue 7 §4: the halves of a healed partition each repaired into a ring of
+        their own; every node merging now and then through a random member (as a
+        peer's swarm does) makes them one ring again: lookups agree, data is found."""
+        left, right = await make_ring(6), await make_ring(6)
+        nodes = left + right
+        rng = random.Random(12)
+        for _ in range(len(nodes)):
+            if ring_ok(nodes):
+                break
+            await asyncio.gather(
+                *(n.merge_through(rng.choice(nodes).me.address) for n in nodes),
+                return_exceptions=True,
+            )
+            for _ in range(3):
+                await asyncio.gather(*(n.stabilize_once() for n in nodes))
+                await asyncio.gather(*(n.check_predecessor_once() for n in nodes))
+        await converge(nodes)
+        await assert_lookups_agree(nodes, keys(10, 11))
+        # entries refreshed by their owners (as every announcement is) are one set again
+        await left[0].add(77, b"from the left", ttl=600)
+        await right[0].add(77, b"from the right", ttl=600)
+        for node in nodes:
+            assert await node.get(77) == {b"from the left", b"from the right"}
+
     async def test_a_dead_successor_is_skipped(self, make_ring: MakeRing) -> None:
         nodes = await make_ring(8)
         await nodes[0].add(99, b"kept", ttl=60)
