@@ -173,6 +173,15 @@ class ProtocolError(NetworkError):
     code = 43
 
 
+class AccessRefused(NetworkError):
+    """A secure link was refused (DESIGN §10): a peer does not trust the other's
+    key, or one peer is secure and the other open. Not retriable: trust must change
+    first (`mapctl trust add`)."""
+
+    retriable = False
+    code = 49
+
+
 class SwarmError(MapError):
     """A problem with swarm membership."""
 
