@@ -162,9 +162,10 @@ async def _go_live(
     peer = control.ops.peer
     bound = await peer.start(listen, lease=lease)
     assert peer.swarm is not None
-    address = advertise or advertised_address(bound, join)
-    if address != bound:
-        peer.swarm.advertise(address)
+    wanted = advertise or advertised_address(bound, join)
+    if wanted != bound:
+        peer.swarm.advertise(wanted)  # a secure peer's gets its key (DESIGN §10)
+    address = peer.address
     await _join_all(peer, join)
     endpoint = await control.start(repo)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())

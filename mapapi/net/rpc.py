@@ -22,7 +22,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
-from mapapi.errors import MapError, PeerUnavailable, ProtocolError, RequestTimeout
+from mapapi.errors import AccessRefused, MapError, PeerUnavailable, ProtocolError, RequestTimeout
 from mapapi.ids import PeerId
 from mapapi.net import codec
 from mapapi.net.codec import ErrorReply, Kind
@@ -186,10 +186,13 @@ class Rpc:
 
     async def forget(self, address: str) -> None:
         """Fail requests pending at `address` with PeerUnavailable and drop the link."""
+        self._fail_pending(address, lambda: PeerUnavailable(f"{address} left before it answered"))
+        await self.transport.forget(address)
+
+    def _fail_pending(self, address: str, error: Callable[[], MapError]) -> None:
         for peer, fut in list(self._pending.values()):
             if peer == address and not fut.done():
-                fut.set_exception(PeerUnavailable(f"{address} left before it answered"))
-        await self.transport.forget(address)
+                fut.set_exception(error())  # one instance each: raising adds a traceback
 
     async def close(self) -> None:
         """Cancel running handlers, fail pending requests with PeerUnavailable,
@@ -248,6 +251,10 @@ class Rpc:
         entry = self._pending.get(request_id)
         if entry is not None and entry[0] == address and not entry[1].done():
             entry[1].set_exception(error)
+
+    def on_link_refused(self, address: str, error: AccessRefused) -> None:
+        """Fail every request pending at `address`: its link can never work."""
+        self._fail_pending(address, lambda: type(error)(str(error)))
 
     # -- serving ---------------------------------------------------------------
 
