@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import inspect
 import logging
 from dataclasses import dataclass
 
@@ -74,7 +75,9 @@ class ZapHandler(zmq.auth.Authenticator):
         assert isinstance(sock, zmq.asyncio.Socket), "start() first"
         while True:
             request: list[bytes] = await sock.recv_multipart()
-            await self.handle_zap_message(request)
+            answered = self.handle_zap_message(request)
+            if inspect.isawaitable(answered):  # a coroutine since pyzmq 25 (not before)
+                await answered
 
     def callback(self, domain: str, z85_key: bytes) -> bool:
         """zmq.auth's credentials provider: is this client key trusted?"""
@@ -129,8 +132,9 @@ def check_link(address: str, endpoint: str, key: bytes | None, security: Securit
         return
     if key is None:
         raise AccessRefused(
-            f"{address} is an open peer's address and this peer is secure: a secure peer "
-            "talks only to secure peers, through the address they print (…#curve=KEY)"
+            f"{address} names no key, and this peer is secure: it talks only to secure "
+            "peers, through the address they print (…#curve=KEY); join an open swarm from an "
+            "open repository"
         )
     if not security.trusts(key):
         raise AccessRefused(

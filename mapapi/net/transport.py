@@ -310,7 +310,7 @@ class ZmqTransport:
     def _refused(self, address: str, error: AccessRefused) -> None:
         """Drop a link that can never work and fail what waits on it; the next
         send to `address` tries again on a fresh link (trust may have changed)."""
-        log.warning("link to %s refused: %s", address, error)
+        log.info("link to %s refused: %s", address, error)
         link = self._dealers.pop(address, None)
         if link is not None:
             for task in link.tasks:
