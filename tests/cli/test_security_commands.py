@@ -3,6 +3,7 @@ join string through the CLI (issue 7 §6, DESIGN §10)."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -123,6 +124,14 @@ class TestSecureDaemon:
             assert split_address(status["join"])[1] == bytes.fromhex(key)
         finally:
             await served.close()
+
+    async def test_a_running_peer_is_not_made_secure_under_its_feet(
+        self, daemon: InProcessDaemon
+    ) -> None:
+        outcome = await asyncio.to_thread(run_main, ["init", str(daemon.repo), "--secure"])
+        assert outcome.code == EXIT_USAGE
+        assert "mapctl peer stop" in outcome.err
+        assert not (daemon.repo / ".mapapi" / "curve").exists()
 
     async def test_an_open_daemon_cannot_join_a_secure_peer(
         self, daemon: InProcessDaemon, make_peer: Callable[..., Awaitable[Peer]]
