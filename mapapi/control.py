@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from mapapi.ops import Operations
     from mapapi.peer import Peer
     from mapapi.repo import Repository
+    from mapapi.security import Security
 
 log = logging.getLogger(__name__)
 
@@ -233,10 +234,15 @@ def _decode_args(text: str) -> dict[str, Json]:
 
 # -- lookup by peer ------------------------------------------------------------------
 async def ask_chunk_list(
-    address: str, table: str | None = None, *, rpc: Rpc | None = None
+    address: str,
+    table: str | None = None,
+    *,
+    rpc: Rpc | None = None,
+    security: Security | None = None,
 ) -> list[ChunkSummary]:
     """The chunks the peer at `address` holds (of `table`, or all), asked over
-    its swarm port on `rpc`, or on a connection of its own without one.
+    its swarm port on `rpc`, or on a connection of its own without one (with
+    the keys of `security` when the asking repository is secure).
 
     Raises:
         NetworkError: the peer did not answer within `QUERY_TIMEOUT` seconds.
@@ -249,7 +255,8 @@ async def ask_chunk_list(
     import zmq.asyncio
 
     context = zmq.asyncio.Context()
-    own = Rpc(ZmqTransport(PeerId.new(), context=context))  # a DEALER only: nothing to bind
+    # a DEALER only: nothing to bind
+    own = Rpc(ZmqTransport(PeerId.new(), context=context, security=security))
     try:
         answer = await own.request(address, query, timeout=QUERY_TIMEOUT, expect=ChunkList)
         return list(answer.chunks)

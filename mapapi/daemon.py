@@ -172,9 +172,10 @@ async def _go_live(
     bound = await peer.start(listen, lease=lease)
     assert peer.swarm is not None
     recalled = [] if join else known_peers.recall(repo)
-    address = advertise or advertised_address(bound, join or recalled)
-    if address != bound:
-        peer.swarm.advertise(address)
+    wanted = advertise or advertised_address(bound, join or recalled)
+    if wanted != bound:
+        peer.swarm.advertise(wanted)  # a secure peer's gets its key (DESIGN §10)
+    address = peer.address
     if join:
         await _join_all(peer, join)
     elif recalled:

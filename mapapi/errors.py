@@ -182,6 +182,15 @@ class CommitUncertain(NetworkError):
     code = 44
 
 
+class AccessRefused(NetworkError):
+    """A secure link was refused (DESIGN §10): a peer does not trust the other's
+    key, or one peer is secure and the other open. Not retriable: trust must change
+    first (`mapctl trust add`)."""
+
+    retriable = False
+    code = 49
+
+
 class SwarmError(MapError):
     """A problem with swarm membership."""
 

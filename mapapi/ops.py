@@ -35,7 +35,10 @@ if TYPE_CHECKING:
 
 Json = Any
 
-_ADDRESS = re.compile(r"tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):\d+|ipc://\S+")
+# an endpoint, then a secure peer's public key (mapapi.security.ADDRESS_KEY)
+_ADDRESS = re.compile(
+    r"(tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]#]+):\d+|ipc://[^\s#]+)(#curve=[0-9a-fA-F]{64})?"
+)
 
 
 class Operations(WatchOperations, MapOperations, TransferOperations):
@@ -467,7 +470,8 @@ OPERATIONS = frozenset(
 
 
 def check_address(address: str) -> str:
-    """`address` if it looks like a peer address (tcp://HOST:PORT or ipc://PATH).
+    """`address` if it looks like a peer address (tcp://HOST:PORT or ipc://PATH,
+    with #curve=KEY for a secure peer).
 
     Raises:
         UsageError: it does not.

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
     from mapapi.net.messages import ChunkSummary, Member
     from mapapi.net.shaping import Shaper
     from mapapi.replication import Progress
+    from mapapi.security import Security
     from mapapi.subscriptions import Subscription, SubscriptionSpec
     from mapapi.swarm import ChordOptions, Swarm
 
@@ -64,8 +65,10 @@ class Peer:
         *,
         name: str = "",
         grid: SpatialGrid | None = None,
+        security: Security | None = None,
     ) -> None:
         self.store = store
+        self.security = security
         self.id = peer_id or PeerId.new()
         self.name = name or self.id.short
         self.grid = grid or SpatialGrid()
@@ -83,9 +86,17 @@ class Peer:
 
     @classmethod
     def of(cls, repo: Repository) -> Peer:
-        """The peer of `repo`: its store, identity and spatial index geometry."""
+        """The peer of `repo`: its store, identity, spatial index geometry and,
+        for a secure repository, its keys and trust list (DESIGN §10)."""
         config = repo.config
-        return cls(repo.open_store(), config.peer_id, name=config.name, grid=config.spatial)
+        security = repo.security()
+        return cls(
+            repo.open_store(),
+            config.peer_id,
+            name=config.name,
+            grid=config.spatial,
+            security=security,
+        )
 
     @classmethod
     def in_memory(cls) -> Peer:
@@ -148,6 +159,7 @@ class Peer:
             places=self.places,
             grid=self.grid,
             liveness=liveness,
+            security=self.security,
         )
         address = await swarm.start(listen)
         swarm.replicator.applied_hooks.append(self.triggers.applied)
@@ -214,7 +226,7 @@ class Peer:
         from mapapi.control import ask_chunk_list
 
         rpc = self.swarm.rpc if self.swarm is not None else None
-        return await ask_chunk_list(address, table, rpc=rpc)
+        return await ask_chunk_list(address, table, rpc=rpc, security=self.security)
 
     async def query_bbox(
         self, box: BBox, table: str | None = None, stats: QueryStats | None = None

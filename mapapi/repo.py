@@ -7,9 +7,9 @@ import logging
 import os
 import time
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mapapi.errors import (
     AlreadyInitialisedError,
@@ -22,6 +22,9 @@ from mapapi.ids import PeerId
 from mapapi.spatial import SpatialGrid
 from mapapi.store.sqlite import SqliteStore
 
+if TYPE_CHECKING:
+    from mapapi.security import Security
+
 REPO_DIR = ".mapapi"
 CONFIG = "config.toml"
 STORE = "store.sqlite"
@@ -32,6 +35,11 @@ CONTROL_SOCKET = "control.sock"  # the daemon's local control endpoint (ipc)
 
 log = logging.getLogger(__name__)
 
+_SECURE_TOML = (
+    "\n# A secure peer (CurveZMQ): its keypair and trust list are in .mapapi/curve/.\n"
+    "[security]\nsecure = true\n"
+)
+
 
 def _toml_str(text: str) -> str:
     """`text` as a TOML basic string: JSON quoting without the surrogate-pair
@@ -41,12 +49,14 @@ def _toml_str(text: str) -> str:
 
 @dataclass(frozen=True)
 class RepoConfig:
-    """What `config.toml` holds: the peer's name and id, and the geometry of the
-    spatial index (which every peer of a swarm must share, DESIGN §7)."""
+    """What `config.toml` holds: the peer's name and id, the geometry of the
+    spatial index (which every peer of a swarm must share, DESIGN §7), and
+    whether the peer is secure (DESIGN §10; its keys are in `.mapapi/curve/`)."""
 
     name: str
     peer_id: PeerId
     spatial: SpatialGrid = field(default_factory=SpatialGrid)
+    secure: bool = False
 
     def to_toml(self) -> str:
         """The config as TOML text (strings quoted as JSON, valid TOML; floats
@@ -59,7 +69,7 @@ class RepoConfig:
             f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
             f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
             f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
-        )
+        ) + (_SECURE_TOML if self.secure else "")
 
     @classmethod
     def from_toml(cls, text: str, source: Path) -> RepoConfig:
@@ -68,12 +78,17 @@ class RepoConfig:
         try:
             data: dict[str, Any] = tomllib.loads(text)
             spatial = data.get("spatial", {})
-            if not isinstance(spatial, dict):
-                raise ValueError("[spatial] must be a table")
+            security = data.get("security", {})
+            if not isinstance(spatial, dict) or not isinstance(security, dict):
+                raise ValueError("[spatial] and [security] must be tables")
+            secure = security.get("secure", False)
+            if not isinstance(secure, bool):
+                raise ValueError("[security] secure must be true or false")
             return cls(
                 name=str(data["name"]),
                 peer_id=PeerId(data["peer_id"]),
                 spatial=SpatialGrid.from_config(spatial),
+                secure=secure,
             )
         except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
             raise CorruptRepoError(f"{source} is damaged: {exc}") from exc
@@ -151,11 +166,16 @@ class Repository:
 
     @classmethod
     def init(
-        cls, path: str | Path, name: str | None = None, spatial: SpatialGrid | None = None
+        cls,
+        path: str | Path,
+        name: str | None = None,
+        spatial: SpatialGrid | None = None,
+        *,
+        secure: bool = False,
     ) -> Repository:
         """Create a repository in `path` (created if missing), with the spatial
         index geometry `spatial` (default: `mapapi.spatial.DEFAULT_BOUNDS` and
-        `DEFAULT_CELLS`).
+        `DEFAULT_CELLS`); `secure` also makes its keypair and empty trust list.
 
         Raises:
             AlreadyInitialisedError: `path` already holds one.
@@ -168,8 +188,13 @@ class Repository:
             )
         meta.mkdir(parents=True, exist_ok=True)
         config = RepoConfig(
-            name=name or root.name, peer_id=PeerId.new(), spatial=spatial or SpatialGrid()
+            name=name or root.name,
+            peer_id=PeerId.new(),
+            spatial=spatial or SpatialGrid(),
+            secure=secure,
         )
+        if secure:
+            _make_keys(meta)
         SqliteStore(meta / STORE, create=True).close()
         tmp = meta / (CONFIG + ".tmp")
         tmp.write_text(config.to_toml(), encoding="utf-8")
@@ -196,9 +221,52 @@ class Repository:
             f"not a map repository (or any parent): {here}; run `mapctl init` first"
         )
 
+    def make_secure(self) -> None:
+        """Make this open repository secure: a keypair and an empty trust list.
+        Its data is kept; its peer must be restarted to use them.
+
+        Raises:
+            UsageError: it is secure already, or its peer runs.
+        """
+        if self.config.secure:
+            raise UsageError(f"{self.root} is a secure repository already")
+        record = self.running_peer()
+        if record is not None:
+            raise UsageError(
+                f"a peer runs on {self.root} (pid {record.pid}); stop it with "
+                "`mapctl peer stop` before making the repository secure"
+            )
+        _make_keys(self.meta_dir)
+        config = replace(self.config, secure=True)
+        tmp = self.meta_dir / (CONFIG + ".tmp")
+        tmp.write_text(config.to_toml(), encoding="utf-8")
+        tmp.replace(self.meta_dir / CONFIG)
+        self.config = config
+
+    def security(self) -> Security | None:
+        """The keypair and trust list of a secure repository; None for an open one.
+
+        Raises:
+            CorruptRepoError: the repository is secure but its secret key is
+                missing or readable by other users.
+        """
+        if not self.config.secure:
+            return None
+        from mapapi.security import Security
+
+        return Security.load(self.meta_dir)
+
     def open_store(self) -> SqliteStore:
         """Open the repository's store."""
         return SqliteStore(self.store_path)
+
+    def is_empty(self) -> bool:
+        """True while the repository holds no table, chunk or commit (as `init` left it)."""
+        store = self.open_store()
+        try:
+            return not (store.tables() or store.chunks() or store.commits(limit=1))
+        finally:
+            store.close()
 
     # -- the peer daemon's pid file and lock -------------------------------------------
     def read_peer_record(self) -> PeerRecord | None:
@@ -251,6 +319,15 @@ class Repository:
         """The pid file's record if its daemon is gone, else None."""
         record = self.read_peer_record()
         return record if record is not None and not self.peer_locked() else None
+
+
+def _make_keys(meta: Path) -> None:
+    """The keypair and empty trust list of a new secure repository; `.mapapi/` is
+    made private (0700): it holds the secret key, the store and the control socket."""
+    from mapapi.security import Security
+
+    meta.chmod(0o700)
+    Security.create(meta)
 
 
 class PeerLock:

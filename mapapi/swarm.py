@@ -31,6 +31,7 @@ from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.recovery import Recovery
 from mapapi.replication import HOLDER_TTL, Replicator
+from mapapi.security import Security, own_address
 from mapapi.spatial import SpatialGrid
 from mapapi.spatial_index import SpatialIndex
 from mapapi.store.base import ReplicaStore
@@ -78,8 +79,10 @@ class Swarm:
         places: ChunkPlaces | None = None,
         grid: SpatialGrid | None = None,
         liveness: LivenessOptions | None = None,
+        security: Security | None = None,
     ) -> None:
-        self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper))
+        self.security = security
+        self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper, security=security))
         self.grid = grid or SpatialGrid()
         self.places = places or ChunkPlaces(store)
         self.index: SpatialIndex | None = None  # made by `start()`, over the ring
@@ -172,7 +175,9 @@ class Swarm:
 
     def advertise(self, address: str) -> None:
         """Tell other peers `address` instead of the bound one (before joining):
-        a wildcard host such as tcp://0.0.0.0:7000 is no address they can reach."""
+        a wildcard host such as tcp://0.0.0.0:7000 is no address they can reach.
+        A secure peer's address gets its public key (DESIGN §10)."""
+        address = own_address(address, self.security)
         self.members.me = Member(self._peer_id, address, self._name)
         self.members.add(self.members.me)
         if self._chord is not None:

@@ -49,12 +49,17 @@ async def until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:  #
 
 @pytest.fixture
 def make_repo(tmp_path: Path) -> Callable[..., Repository]:
-    """Factory of initialised repositories under the test's temp folder."""
+    """Factory of initialised repositories under the test's temp folder
+    (`secure=True`: with a keypair and an empty trust list)."""
     counter = iter(range(1_000_000))
 
-    def _make(name: str | None = None, spatial: SpatialGrid | None = None) -> Repository:
+    def _make(
+        name: str | None = None, spatial: SpatialGrid | None = None, *, secure: bool = False
+    ) -> Repository:
         index = next(counter)
-        return Repository.init(tmp_path / f"repo{index}", name or f"peer{index}", spatial)
+        return Repository.init(
+            tmp_path / f"repo{index}", name or f"peer{index}", spatial, secure=secure
+        )
 
     return _make
 
@@ -66,8 +71,10 @@ async def make_peer(
     """Factory of peers on real SQLite repositories; all are closed after the test."""
     peers: list[Peer] = []
 
-    async def _make(name: str | None = None, spatial: SpatialGrid | None = None) -> Peer:
-        repo = make_repo(name, spatial)
+    async def _make(
+        name: str | None = None, spatial: SpatialGrid | None = None, *, secure: bool = False
+    ) -> Peer:
+        repo = make_repo(name, spatial, secure=secure)
         peer = Peer.of(repo)
         peers.append(peer)
         return peer

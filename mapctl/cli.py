@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from mapctl.commands import bench, demo, history, lookup, maps, peer, repo, view, watch
+from mapctl.commands import bench, demo, history, lookup, maps, peer, repo, security, view, watch
 from mapctl.session import Session
 
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
@@ -33,7 +33,7 @@ def cli(ctx: click.Context, path: Path, view_name: str, verbose: bool) -> None:
     ctx.call_on_close(session.close)
 
 
-for module in (repo, view, history, peer, lookup, watch, maps, bench, demo):
+for module in (repo, view, history, peer, security, lookup, watch, maps, bench, demo):
     module.register(cli)
 
 

@@ -15,6 +15,7 @@ out. Nothing here asserts a speed; the figures go to docs/benchmarks.md.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import platform
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import IO, Any, Literal
 
 from mapapi.errors import MapError
+from mapapi.security import key_text, split_address
 
 STARTUP_TIMEOUT = 30.0
 CALL_TIMEOUT = 60.0
@@ -54,6 +56,7 @@ class WorkerProcess:
         lease: write-lock lease in seconds.
         use_uvloop: run the child's event loop on uvloop.
         log: where the child's stderr goes (a file; None discards it).
+        secure: a secure peer (its address carries its key; it trusts no one yet).
     """
 
     def __init__(
@@ -64,12 +67,13 @@ class WorkerProcess:
         lease: float = 5.0,
         use_uvloop: bool = False,
         log: IO[str] | None = None,
+        secure: bool = False,
     ) -> None:
         self.name = name
         command = [sys.executable, "-m", "mapapi.bench.worker", "--repo", str(folder)]
         command += ["--name", name, "--lease", str(lease)]
-        if use_uvloop:
-            command.append("--uvloop")
+        command += ["--uvloop"] if use_uvloop else []
+        command += ["--secure"] if secure else []
         self.proc = subprocess.Popen(
             command,
             stdin=subprocess.PIPE,
@@ -153,9 +157,15 @@ class WorkerProcess:
 
 @contextlib.contextmanager
 def spawn_workers(
-    count: int, folder: Path, *, lease: float = 5.0, use_uvloop: bool = False
+    count: int,
+    folder: Path,
+    *,
+    lease: float = 5.0,
+    use_uvloop: bool = False,
+    secure: bool = False,
 ) -> Iterator[list[WorkerProcess]]:
     """`count` started workers with repositories under `folder`; all stopped on exit.
+    `secure` workers trust each other's keys (a secure swarm, DESIGN §10).
 
     Their stderr goes to `folder/worker-I.log`.
     """
@@ -172,10 +182,16 @@ def spawn_workers(
                     lease=lease,
                     use_uvloop=use_uvloop,
                     log=log,
+                    secure=secure,
                 )
             )
         for worker in started:
             worker.wait_ready()
+        if secure:
+            keys = {w.name: split_address(w.address)[1] for w in started}
+            for worker in started:
+                others = [key_text(k) for n, k in keys.items() if n != worker.name and k]
+                worker.call("trusted", "trust", *others)
         yield started
     finally:
         for worker in started:
@@ -240,8 +256,9 @@ def percentile(values: Sequence[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(len(ordered) * q))]
 
 
-def _environment(use_uvloop: bool, load: float) -> dict[str, Any]:
+def _environment(use_uvloop: bool, load: float, secure: bool = False) -> dict[str, Any]:
     return {
+        "secure": secure,
         "loop": "uvloop" if use_uvloop else "asyncio",
         "python": platform.python_version(),
         "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} cpu",
@@ -261,8 +278,10 @@ def viewtest(
     directory: str | Path | None = None,
     use_uvloop: bool = False,
     deadline: float = RUN_DEADLINE,
+    secure: bool = False,
 ) -> dict[str, Any]:
-    """Paper Algorithm 1 across `peers` processes, `n` increments each.
+    """Paper Algorithm 1 across `peers` processes, `n` increments each (`secure`:
+    a secure swarm, CurveZMQ between the peers).
 
     Returns:
         JSON-ready figures: peers, n, expected (a0 + peers*n), final (the value
@@ -275,7 +294,8 @@ def viewtest(
     if peers < 1 or n < 1:
         raise ValueError(f"peers and n must be at least 1, got {peers} and {n}")
     load = os.getloadavg()[0]
-    with _scratch(directory) as tmp, spawn_workers(peers, Path(tmp), use_uvloop=use_uvloop) as ws:
+    spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
+    with _scratch(directory) as tmp, spawn(peers, Path(tmp)) as ws:
         _, item = counter_swarm(ws, a0)
         sent0, types0, cpu0 = _traffic(ws)
         reports, seconds = run_increments(ws, n, item, deadline)
@@ -308,7 +328,7 @@ def viewtest(
         "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / commits, 3),
         "seconds": round(seconds, 3),
         "a0": a0,
-        **_environment(use_uvloop, load),
+        **_environment(use_uvloop, load, secure),
     }
 
 
@@ -340,6 +360,7 @@ def commit_latency(
     directory: str | Path | None = None,
     use_uvloop: bool = False,
     warmup: int = 50,
+    secure: bool = False,
 ) -> dict[str, Any]:
     """Uncontended commits by one writer to a chunk held by `holders` processes.
 
@@ -350,6 +371,7 @@ def commit_latency(
             lowest peer id), which costs one more round trip; "arbiter" from
             the arbiter itself. With one holder both are the same.
         warmup: untimed commits first (connections, caches).
+        secure: a secure swarm (CurveZMQ between the peers).
 
     Returns:
         JSON-ready figures: holders, n, p50_ms / p99_ms / mean_ms of `commit()`,
@@ -359,7 +381,8 @@ def commit_latency(
     if holders < 1 or n < 1:
         raise ValueError(f"holders and n must be at least 1, got {holders} and {n}")
     load = os.getloadavg()[0]
-    with _scratch(directory) as tmp, spawn_workers(holders, Path(tmp), use_uvloop=use_uvloop) as ws:
+    spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
+    with _scratch(directory) as tmp, spawn(holders, Path(tmp)) as ws:
         _, item = counter_swarm(ws)
         by_id = sorted(ws, key=lambda w: w.id)
         chosen = by_id[0] if writer == "arbiter" else by_id[-1]
@@ -384,5 +407,5 @@ def commit_latency(
         "messages_by_type": _diff(types1, types0),
         "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / n, 3),
         "aborts": report["aborts"],
-        **_environment(use_uvloop, load),
+        **_environment(use_uvloop, load, secure),
     }

@@ -1,13 +1,15 @@
 """A peer process for swarm experiments, driven over stdin/stdout (STYLE §7).
 
-    python -m mapapi.bench.worker --repo DIR [--name NAME] [--lease S] [--uvloop]
+    python -m mapapi.bench.worker --repo DIR [--name NAME] [--lease S] [--uvloop] [--secure]
 
-The worker opens the repository in DIR (creating it if needed), starts a peer on
+The worker opens the repository in DIR (creating it if needed, secure with
+`--secure`: its address then carries its key, DESIGN §10), starts a peer on
 tcp://127.0.0.1:0 and prints `ready {"id", "address", "name"}`. It then reads one
 command per line from stdin and answers each with exactly one line
 `WORD {json}` (or `error {"error", "message"}`), so the parent always knows
 which step finished:
 
+    trust KEY...                  -> trusted {"keys"}              a secure peer's trust list
     join ADDR                     -> joined {"members"}
     create A0                     -> created {"chunk", "item"}     table + chunk + counter
     participate CHUNK             -> participating {"chunk", "holders"}
@@ -48,6 +50,7 @@ from mapapi.errors import ConflictError, LockTimeout, MapError, UsageError
 from mapapi.ids import ChunkId, ItemId
 from mapapi.peer import Peer
 from mapapi.repo import Repository
+from mapapi.security import parse_key
 from mapapi.table import message_class
 
 log = logging.getLogger(__name__)
@@ -69,11 +72,11 @@ def die_with_parent() -> None:
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
-def open_repo(folder: Path, name: str) -> Repository:
-    """The repository in `folder`, initialised first if there is none."""
+def open_repo(folder: Path, name: str, secure: bool = False) -> Repository:
+    """The repository in `folder`, initialised first (`secure` or open) if there is none."""
     if (folder / ".mapapi").is_dir():
         return Repository.find(folder)
-    return Repository.init(folder, name)
+    return Repository.init(folder, name, secure=secure)
 
 
 class Worker:
@@ -93,6 +96,11 @@ class Worker:
         if verb == "join":
             members = await self.peer.join(_arg(args, 0))
             return "joined", {"members": len(members)}
+        if verb == "trust":
+            if self.peer.security is None:
+                raise UsageError("this peer is open: start it with --secure")
+            added = [self.peer.security.trust.add(parse_key(k)) for k in args]
+            return "trusted", {"keys": len(added)}
         if verb == "create":
             return "created", await self.create(int(args[0]) if args else 0)
         if verb == "participate":
@@ -217,7 +225,7 @@ async def _stdin_lines() -> asyncio.StreamReader:
 
 async def serve(args: argparse.Namespace) -> None:
     """Start the peer, announce it, and answer commands until quit or EOF."""
-    repo = open_repo(Path(args.repo), args.name or Path(args.repo).name)
+    repo = open_repo(Path(args.repo), args.name or Path(args.repo).name, args.secure)
     peer = Peer.of(repo)
     try:
         address = await peer.start(args.listen, lease=args.lease)
@@ -250,6 +258,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--listen", default="tcp://127.0.0.1:0", help="zmq endpoint")
     parser.add_argument("--lease", type=float, default=5.0, help="write-lock lease, seconds")
     parser.add_argument("--uvloop", action="store_true", help="run the event loop on uvloop")
+    parser.add_argument("--secure", action="store_true", help="a new repository is secure")
     parser.add_argument("--log-level", default="WARNING", help="stderr logging level")
     args = parser.parse_args(argv)
     die_with_parent()

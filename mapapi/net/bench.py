@@ -9,7 +9,8 @@ Four figures, each a Ping/Pong-sized request and its reply over loopback tcp:
 - `raw-blocking`: a blocking pyzmq DEALER against a blocking ROUTER echo process (the floor);
 - `raw-asyncio`: both ends through `zmq.asyncio`, one await per message;
 - `rpc`: `Rpc.request` through `ZmqTransport` against an `Rpc` echo process;
-- `rpc-in-process`: both `Rpc`s on one event loop, as in the swarm tests.
+- `rpc-in-process`: both `Rpc`s on one event loop, as in the swarm tests;
+- `rpc-secure-in-process`: the same over CurveZMQ (a secure swarm, DESIGN §10).
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ import json
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Coroutine
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 import zmq
@@ -32,6 +35,7 @@ from mapapi.ids import PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.rpc import Request, Rpc
 from mapapi.net.transport import ZmqTransport
+from mapapi.security import Security
 
 T = TypeVar("T")
 
@@ -46,17 +50,21 @@ def _run(coro: Coroutine[Any, Any, T], use_uvloop: bool) -> T:
 
 @dataclass(frozen=True, slots=True)
 class RoundTrip:
-    """Latency percentiles of `n` sequential round trips, in microseconds."""
+    """Latency percentiles of `n` sequential round trips, in microseconds, and the
+    CPU this process used per round trip (all its threads; for an in-process figure
+    that is both ends, the cost that load on a shared machine barely changes)."""
 
     label: str
     n: int
     p50_us: float
     p99_us: float
     mean_us: float
+    cpu_us: float | None = None
 
 
-def summarize(label: str, seconds: list[float]) -> RoundTrip:
-    """Percentiles of round-trip samples given in seconds."""
+def summarize(label: str, seconds: list[float], cpu_seconds: float | None = None) -> RoundTrip:
+    """Percentiles of round-trip samples given in seconds (and `cpu_seconds`, the
+    process CPU time they took in all)."""
     ordered = sorted(seconds)
     n = len(ordered)
     if n == 0:
@@ -67,6 +75,7 @@ def summarize(label: str, seconds: list[float]) -> RoundTrip:
         ordered[n // 2] * 1e6,
         ordered[min(n - 1, int(n * 0.99))] * 1e6,
         statistics.fmean(ordered) * 1e6,
+        None if cpu_seconds is None else cpu_seconds / n * 1e6,
     )
 
 
@@ -75,7 +84,12 @@ def _echo(req: Request) -> Pong:
 
 
 async def measure_round_trip(
-    n: int = 10_000, *, address: str | None = None, payload: int = 0, warmup: int = 500
+    n: int = 10_000,
+    *,
+    address: str | None = None,
+    payload: int = 0,
+    warmup: int = 500,
+    secure: bool = False,
 ) -> RoundTrip:
     """Time `n` sequential `Rpc.request(Ping)` round trips.
 
@@ -84,31 +98,60 @@ async def measure_round_trip(
         address: an `Rpc` echo server (see `serve_rpc`); None starts one on this loop.
         payload: bytes of Ping payload.
         warmup: untimed round trips first (connection set-up, caches).
+        secure: both ends on this loop over CurveZMQ, with keys that trust each other
+            (ignores `address`).
 
     Returns:
-        The percentiles, labelled "rpc" or "rpc-in-process".
+        The percentiles, labelled "rpc", "rpc-in-process" or "rpc-secure-in-process".
     """
-    client = Rpc(ZmqTransport(PeerId.new()))
+    with tempfile.TemporaryDirectory() as folder:
+        keys = _trusting_pair(Path(folder)) if secure else (None, None)
+        samples, cpu = await _round_trips(n, None if secure else address, payload, warmup, *keys)
+    if secure:
+        return summarize("rpc-secure-in-process", samples, cpu)
+    return summarize("rpc" if address is not None else "rpc-in-process", samples, cpu)
+
+
+def _trusting_pair(folder: Path) -> tuple[Security, Security]:
+    """Two keypairs in `folder`, each trusting the other."""
+    client, server = Security.create(folder / "client"), Security.create(folder / "server")
+    client.trust.add(server.keys.public)
+    server.trust.add(client.keys.public)
+    return client, server
+
+
+async def _round_trips(
+    n: int,
+    address: str | None,
+    payload: int,
+    warmup: int,
+    client_keys: Security | None,
+    server_keys: Security | None,
+) -> tuple[list[float], float]:
+    client = Rpc(ZmqTransport(PeerId.new(), security=client_keys))
     server: Rpc | None = None
     try:
         await client.start()
         if address is None:
-            server = Rpc(ZmqTransport(PeerId.new()))
+            server = Rpc(ZmqTransport(PeerId.new(), security=server_keys))
             server.register(Ping, _echo)
             address = await server.start()
         body = Ping(b"x" * payload)
         samples: list[float] = []
         clock = time.perf_counter
-        for i in range(warmup + n):
+        for _ in range(warmup):
+            await client.request(address, body)
+        cpu = time.process_time()
+        for _ in range(n):
             start = clock()
             await client.request(address, body)
-            if i >= warmup:
-                samples.append(clock() - start)
+            samples.append(clock() - start)
+        cpu = time.process_time() - cpu
     finally:
         await client.close()
         if server is not None:
             await server.close()
-    return summarize("rpc" if server is None else "rpc-in-process", samples)
+    return samples, cpu
 
 
 def measure_raw_blocking(address: str, n: int, payload: bytes, warmup: int = 500) -> RoundTrip:
@@ -218,6 +261,7 @@ def run_all(n: int, payload: int, use_uvloop: bool = False) -> list[RoundTrip]:
     with _Server("rpc", use_uvloop) as address:
         results.append(_run(measure_round_trip(n, address=address, payload=payload), use_uvloop))
     results.append(_run(measure_round_trip(n, payload=payload), use_uvloop))
+    results.append(_run(measure_round_trip(n, payload=payload, secure=True), use_uvloop))
     return results
 
 
@@ -244,7 +288,8 @@ def main(argv: list[str] | None = None) -> None:
         print(json.dumps([asdict(r) for r in results]))
         return
     for r in results:
-        print(f"{r.label:15} n={r.n:6}  p50 {r.p50_us:7.1f} µs  p99 {r.p99_us:7.1f} µs")
+        cpu = f"  CPU {r.cpu_us:6.1f} µs" if r.cpu_us is not None else ""
+        print(f"{r.label:22} n={r.n:6}  p50 {r.p50_us:7.1f} µs  p99 {r.p99_us:7.1f} µs{cpu}")
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
-from mapapi.errors import MapError, PeerUnavailable, ProtocolError, RequestTimeout
+from mapapi.errors import AccessRefused, MapError, PeerUnavailable, ProtocolError, RequestTimeout
 from mapapi.ids import PeerId
 from mapapi.net import codec
 from mapapi.net.codec import ErrorReply, Kind
@@ -195,15 +195,18 @@ class Rpc:
 
     async def forget(self, address: str) -> None:
         """Fail requests pending at `address` with PeerUnavailable and drop the link."""
-        self.fail_pending(address, f"{address} left before it answered")
+        self._fail_pending(address, lambda: PeerUnavailable(f"{address} left before it answered"))
         await self.transport.forget(address)
+
+    def _fail_pending(self, address: str, error: Callable[[], MapError]) -> None:
+        for peer, fut in list(self._pending.values()):
+            if peer == address and not fut.done():
+                fut.set_exception(error())  # one instance each: raising adds a traceback
 
     def fail_pending(self, address: str, reason: str) -> None:
         """Fail the requests pending at `address` now with PeerUnavailable(`reason`)
         (it was declared dead: waiting out their deadlines would only stall)."""
-        for peer, fut in list(self._pending.values()):
-            if peer == address and not fut.done():
-                fut.set_exception(PeerUnavailable(reason))
+        self._fail_pending(address, lambda: PeerUnavailable(reason))
 
     async def close(self) -> None:
         """Cancel running handlers, fail pending requests with PeerUnavailable,
@@ -262,6 +265,10 @@ class Rpc:
         entry = self._pending.get(request_id)
         if entry is not None and entry[0] == address and not entry[1].done():
             entry[1].set_exception(error)
+
+    def on_link_refused(self, address: str, error: AccessRefused) -> None:
+        """Fail every request pending at `address`: its link can never work."""
+        self._fail_pending(address, lambda: type(error)(str(error)))
 
     # -- serving ---------------------------------------------------------------
 

@@ -10,6 +10,15 @@ This module is the one place that stamps the Lamport clock: `tick()` on every
 send, `merge()` on every decoded receive (DESIGN §4). It also counts traffic,
 applies optional link shaping and drops malformed or oversized input, answering
 it with an ErrorReply when the request id can be recovered (DESIGN §11).
+
+With a `Security` the sockets speak CurveZMQ (`mapapi.net.curve`, DESIGN §10):
+the ROUTER admits trusted keys only, the address carries the public key
+(`tcp://HOST:PORT#curve=KEY`), and each DEALER checks the key of the peer it
+reaches. Every new DEALER (`mapapi.net.links`), secure or not, has a handshake
+monitor until its first handshake completes, so a link that can never work (a
+refused key, a secure peer and an open one) fails its requests with
+`AccessRefused` at once instead of timing out; it costs a few events per new
+link, nothing per message, and no descriptors once the link works.
 """
 
 from __future__ import annotations
@@ -24,12 +33,14 @@ import zmq
 import zmq.asyncio
 
 from mapapi.clock import LamportClock
-from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError
+from mapapi.errors import AccessRefused, NetworkError, PeerUnavailable, ProtocolError
 from mapapi.ids import PeerId
-from mapapi.net import codec
+from mapapi.net import codec, curve
 from mapapi.net.codec import Envelope, ErrorReply, Kind
+from mapapi.net.links import Link
 from mapapi.net.shaping import Shaper
 from mapapi.net.stats import Stats
+from mapapi.security import Security, keyed_address
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +84,9 @@ class Sink(Protocol):
     def on_broken_reply(self, address: str, request_id: int, error: ProtocolError) -> None:
         """A reply for `request_id` arrived from `address` but could not be decoded."""
 
+    def on_link_refused(self, address: str, error: AccessRefused) -> None:
+        """The link to `address` can never work (see `mapapi.net.curve.LinkWatch`)."""
+
 
 class Transport(Protocol):
     """The seam between the RPC layer and the sockets (STYLE §1)."""
@@ -113,6 +127,7 @@ class ZmqTransport:
         context: a zmq.asyncio context to share; by default the transport owns one.
         max_message_size: larger messages are dropped and counted.
         shaper: optional simulated latency/bandwidth per link (off by default).
+        security: keys and trust list of a secure peer (None: an open peer).
     """
 
     def __init__(
@@ -123,8 +138,10 @@ class ZmqTransport:
         context: zmq.asyncio.Context | None = None,
         max_message_size: int = DEFAULT_MAX_MESSAGE_SIZE,
         shaper: Shaper | None = None,
+        security: Security | None = None,
     ) -> None:
         self.peer_id = peer_id
+        self.security = security
         self.clock = clock or LamportClock()
         self.stats = Stats()
         self.shaper = shaper
@@ -132,8 +149,8 @@ class ZmqTransport:
         self._context = context
         self._owns_context = context is None
         self._router: zmq.asyncio.Socket | None = None
-        self._dealers: dict[str, zmq.asyncio.Socket] = {}
-        self._dealer_readers: dict[str, asyncio.Task[None]] = {}
+        self._dealers: dict[str, Link] = {}
+        self._zap: curve.ZapHandler | None = None
         self._readers: set[asyncio.Task[None]] = set()
         self._timers: set[asyncio.TimerHandle] = set()
         self._sink: Sink | None = None
@@ -142,7 +159,8 @@ class ZmqTransport:
 
     @property
     def address(self) -> str:
-        """The bound endpoint, e.g. tcp://127.0.0.1:43121 (after `start`)."""
+        """The bound endpoint, e.g. tcp://127.0.0.1:43121 (after `start`), with
+        `#curve=KEY` when secure."""
         if self._address is None:
             raise RuntimeError("transport not started")
         return self._address
@@ -163,7 +181,8 @@ class ZmqTransport:
             bind: a zmq endpoint; port 0 (or *) picks a free port.
 
         Returns:
-            The real bound endpoint (LAST_ENDPOINT), which peers connect to.
+            The address peers connect to: the bound endpoint (LAST_ENDPOINT), and
+            when secure its public key.
 
         Raises:
             NetworkError: the address cannot be bound.
@@ -174,12 +193,18 @@ class ZmqTransport:
             self._context = zmq.asyncio.Context()
         router = self._socket(zmq.ROUTER)
         try:
+            if self.security is not None:
+                self._serve_zap(self._context, self.security)
+                curve.secure_router(router, self.security)
             router.bind(bind)
         except zmq.ZMQError as exc:
             router.close(linger=0)
             raise NetworkError(f"cannot listen on {bind}: {exc}") from exc
         self._router = router
-        self._address = router.getsockopt_string(zmq.LAST_ENDPOINT)
+        endpoint = router.getsockopt_string(zmq.LAST_ENDPOINT)
+        if self.security is not None:
+            endpoint = keyed_address(endpoint, self.security.keys.public)
+        self._address = endpoint
         self._spawn(self._read(router, self._on_router_frames), f"router {self._address}")
         log.debug("peer %s listening on %s", self.peer_id.short, self._address)
         return self._address
@@ -218,13 +243,12 @@ class ZmqTransport:
 
     async def forget(self, address: str) -> None:
         """Close the link to `address` (a peer that left); a later send reopens it."""
-        sock = self._dealers.pop(address, None)
-        task = self._dealer_readers.pop(address, None)
-        if task is not None:
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)
-        if sock is not None:
-            sock.close(linger=0)
+        link = self._dealers.pop(address, None)
+        if link is not None:
+            for task in link.tasks:
+                task.cancel()
+            await asyncio.gather(*link.tasks, return_exceptions=True)
+            link.close()
 
     async def close(self) -> None:
         """Cancel and await the readers, close every socket (LINGER=0), end the context."""
@@ -238,10 +262,13 @@ class ZmqTransport:
         for task in readers:
             task.cancel()
         await asyncio.gather(*readers, return_exceptions=True)
-        for sock in [*self._dealers.values(), *([self._router] if self._router else [])]:
-            sock.close(linger=0)
+        for link in self._dealers.values():
+            link.close()
         self._dealers.clear()
-        self._dealer_readers.clear()
+        if self._router is not None:
+            self._router.close(linger=0)
+        if self._zap is not None:
+            self._zap.stop()
         if self._owns_context and self._context is not None:
             self._context.term()
         log.debug("peer %s transport closed", self.peer_id.short)
@@ -261,23 +288,43 @@ class ZmqTransport:
         return sock
 
     def _dealer(self, address: str) -> zmq.asyncio.Socket:
-        sock = self._dealers.get(address)
-        if sock is not None:
-            return sock
+        link = self._dealers.get(address)
+        if link is not None:
+            return link.sock
         if self._context is None:
             raise RuntimeError("transport not started")
-        sock = self._socket(zmq.DEALER)
-        try:
-            sock.connect(address)
-        except zmq.ZMQError as exc:
-            sock.close(linger=0)
-            raise ValueError(f"not a peer address: {address!r} ({exc})") from exc
-        self._dealers[address] = sock
-        self._dealer_readers[address] = self._spawn(
-            self._read(sock, lambda frames: self._on_dealer_frames(address, frames)),
-            f"dealer {address}",
+        link = Link.open(lambda: self._socket(zmq.DEALER), address, self.security)
+        link.tasks = (
+            self._spawn(
+                self._read(link.sock, lambda frames: self._on_dealer_frames(address, frames)),
+                f"dealer {address}",
+            ),
+            self._spawn(
+                link.watch(self.security, lambda error: self._refused(address, error)),
+                f"handshakes {address}",
+            ),
         )
-        return sock
+        self._dealers[address] = link
+        return link.sock
+
+    def _refused(self, address: str, error: AccessRefused) -> None:
+        """Drop a link that can never work and fail what waits on it; the next
+        send to `address` tries again on a fresh link (trust may have changed)."""
+        log.info("link to %s refused: %s", address, error)
+        link = self._dealers.pop(address, None)
+        if link is not None:
+            for task in link.tasks:
+                if task is not asyncio.current_task():
+                    task.cancel()
+            link.close()
+        if self._sink is not None:
+            self._sink.on_link_refused(address, error)
+
+    def _serve_zap(self, context: zmq.asyncio.Context, security: Security) -> None:
+        zap = curve.ZapHandler(context, security)
+        zap.start()
+        self._zap = zap
+        self._spawn(zap.serve(), "zap")
 
     def _out(
         self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int

@@ -45,6 +45,9 @@ _DIR_OPTION = click.option(
 _UVLOOP_OPTION = click.option(
     "--uvloop", "use_uvloop", is_flag=True, help="Run every peer's event loop on uvloop."
 )
+_SECURE_OPTION = click.option(
+    "--secure", is_flag=True, help="A secure swarm: CurveZMQ between peers that trust each other."
+)
 
 
 def _render(title: str, result: dict[str, Any], as_json: bool) -> None:
@@ -67,9 +70,16 @@ def _render(title: str, result: dict[str, Any], as_json: bool) -> None:
 @click.option("--a0", default=0, show_default=True, help="The counter's first value.")
 @_DIR_OPTION
 @_UVLOOP_OPTION
+@_SECURE_OPTION
 @json_option
 def bench_viewtest(
-    peers: int, n: int, a0: int, directory: str | None, use_uvloop: bool, as_json: bool
+    peers: int,
+    n: int,
+    a0: int,
+    directory: str | None,
+    use_uvloop: bool,
+    secure: bool,
+    as_json: bool,
 ) -> None:
     """Paper Algorithm 1: P peer processes each increment one counter N times.
 
@@ -78,7 +88,7 @@ def bench_viewtest(
     """
     from mapapi.bench.swarm import check_viewtest, viewtest
 
-    result = viewtest(peers, n, a0=a0, directory=directory, use_uvloop=use_uvloop)
+    result = viewtest(peers, n, a0=a0, directory=directory, use_uvloop=use_uvloop, secure=secure)
     _render(f"bench viewtest: {peers} peers x {n}", result, as_json)
     check_viewtest(result)
 
@@ -104,9 +114,16 @@ def bench_viewtest(
 )
 @_DIR_OPTION
 @_UVLOOP_OPTION
+@_SECURE_OPTION
 @json_option
 def bench_commit(
-    holders: int, n: int, writer: str, directory: str | None, use_uvloop: bool, as_json: bool
+    holders: int,
+    n: int,
+    writer: str,
+    directory: str | None,
+    use_uvloop: bool,
+    secure: bool,
+    as_json: bool,
 ) -> None:
     """Uncontended commit latency: one writer, a chunk held by K peer processes."""
     from mapapi.bench.swarm import commit_latency
@@ -117,6 +134,7 @@ def bench_commit(
         writer="arbiter" if writer == "arbiter" else "other",
         directory=directory,
         use_uvloop=use_uvloop,
+        secure=secure,
     )
     _render(f"bench commit: {holders} holders", result, as_json)
 

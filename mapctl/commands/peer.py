@@ -249,6 +249,35 @@ def _chunk_choice(values: tuple[str, ...]) -> list[str] | None:
     return [] if specs == ["none"] else specs
 
 
+def _clone_target(directory: Path, address: str, name: str | None) -> tuple[Repository, bool]:
+    """The repository to clone into, and whether it was made now.
+
+    Raises:
+        UsageError: DIR is a repository with data, or ADDR is a secure swarm and DIR
+            is no repository yet (the swarm cannot trust a key made on the spot).
+    """
+    from mapapi import Repository, UsageError
+    from mapapi.security import split_address
+
+    if (directory / ".mapapi" / "config.toml").is_file():
+        repo = Repository.find(directory)
+        if name or not repo.is_empty():
+            raise UsageError(
+                f"{repo.root} is a repository already; clone into a new folder, or into one "
+                "that `mapctl init` just made (no --name then)"
+            )
+        return repo, False
+    endpoint, key = split_address(address)
+    if key is not None:
+        raise UsageError(
+            f"{endpoint} is a secure swarm: its peers must trust the new peer's key before "
+            f"it joins. Run `mapctl init {directory} --secure`, have every peer of the swarm "
+            f"`mapctl trust add` the key it prints, trust theirs (`mapctl -C {directory} "
+            f"trust add KEY`), then run this clone again"
+        )
+    return Repository.init(directory, name), True
+
+
 @click.command("clone")
 @click.argument("address", metavar="ADDR")
 @click.argument("directory", metavar="DIR", type=click.Path(file_okay=False, path_type=Path))
@@ -272,8 +301,12 @@ def clone(
     name: str | None,
     as_json: bool,
 ) -> None:
-    """Make DIR a new peer of the swarm at ADDR: init, start its peer, join, participate."""
-    from mapapi import MapError, Repository, daemon
+    """Make DIR a new peer of the swarm at ADDR: init, start its peer, join, participate.
+
+    DIR may also be a repository `mapctl init` just made (still empty): that is how
+    a secure swarm is cloned, since the swarm must trust the new peer's key first.
+    """
+    from mapapi import MapError, daemon
     from mapapi.ops import check_address
     from mapctl import render
 
@@ -281,7 +314,7 @@ def clone(
     check_address(listen)
     wanted = _chunk_choice(chunks)
     existed = directory.exists()
-    repo = Repository.init(directory, name)
+    repo, made = _clone_target(directory, address, name)
     try:
         argv = daemon.daemon_command(repo, listen, (address,), None, session.verbose)
         record = daemon.spawn_detached(repo, argv)
@@ -289,7 +322,8 @@ def clone(
         import shutil
 
         # nothing but an empty repository was made: leave no half-made clone behind
-        shutil.rmtree(repo.root if not existed else repo.meta_dir, ignore_errors=True)
+        if made:
+            shutil.rmtree(repo.root if not existed else repo.meta_dir, ignore_errors=True)
         raise
     sub = Session(repo.root, session.view, session.verbose)
     try:

@@ -26,37 +26,63 @@ from mapctl.session import Session, json_option, pass_session
     metavar="NX NY NZ",
     help="Cells of the spatial index along x, y, z [default: 32 32 1].",
 )
+@click.option(
+    "--secure",
+    is_flag=True,
+    help="Make a secure peer: a keypair and an empty trust list (CurveZMQ). In an "
+    "existing open repository, add them and keep its data.",
+)
 @json_option
 def init(
     path: Path,
     name: str | None,
     bounds: tuple[float, ...] | None,
     cells: tuple[int, int, int] | None,
+    secure: bool,
     as_json: bool,
 ) -> None:
     """Create an empty map repository in PATH (default: here).
 
     Every peer of a swarm must use the same spatial index (--bounds, --cells):
-    a peer with another one is refused when it joins.
+    a peer with another one is refused when it joins. A secure peer (--secure)
+    talks only to secure peers whose keys it trusts (`mapctl trust add`).
     """
     from mapapi import Repository
+    from mapapi.errors import AlreadyInitialisedError
+    from mapapi.security import key_text
     from mapapi.spatial import DEFAULT_BOUNDS, DEFAULT_CELLS, BBox, SpatialGrid
     from mapctl import render
 
     grid = SpatialGrid(
         BBox.from_tuple(bounds) if bounds else DEFAULT_BOUNDS, cells or DEFAULT_CELLS
     )
-    repo = Repository.init(path, name, grid)
+    try:
+        repo = Repository.init(path, name, grid, secure=secure)
+        made = f"Initialised empty {'secure ' if secure else ''}map repository in {{}}"
+    except AlreadyInitialisedError:
+        if not secure or name or bounds or cells:
+            raise
+        repo = Repository.find(path)
+        repo.make_secure()
+        made = "Made the map repository in {} secure (its data is kept)"
+    security = repo.security()
     info = {
         "path": str(repo.root),
         "name": repo.config.name,
         "peer_id": repo.config.peer_id,
-        "spatial": grid.to_config(),
+        "spatial": repo.config.spatial.to_config(),
+        "secure": security is not None,
+        **({"public_key": key_text(security.keys.public)} if security else {}),
     }
     if as_json:
         render.emit_json(info)
-    else:
-        render.line(f"Initialised empty map repository in {repo.meta_dir}")
+        return
+    render.line(made.format(repo.meta_dir))
+    if security is not None:
+        render.note(
+            f"public key {info['public_key']}: peers that trust it (`mapctl trust add KEY`) "
+            "admit this one"
+        )
 
 
 @click.group("table")

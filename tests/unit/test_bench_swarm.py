@@ -111,3 +111,10 @@ def test_commit_latency_counts_messages_of_every_holder(tmp_path: Path) -> None:
     # lock, stage and apply+unlock at the one other holder: a request and a reply each
     assert figures["messages_per_commit"] == 6.0
     assert figures["p50_ms"] > 0
+
+
+@pytest.mark.slow
+def test_a_secure_swarm_commits_with_the_same_messages(tmp_path: Path) -> None:
+    figures = commit_latency(2, 5, writer="arbiter", directory=tmp_path, warmup=1, secure=True)
+    assert figures["secure"] is True
+    assert figures["messages_per_commit"] == 6.0  # CurveZMQ adds no message, only bytes
