@@ -142,6 +142,11 @@ class LockTable:
             lock = self._locks[chunk] = ChunkLock(self.lease)
         return lock
 
+    def get(self, chunk: str) -> ChunkLock | None:
+        """A chunk's lock if it has one (without creating it: a message about a
+        chunk nobody locked here must leave no state behind)."""
+        return self._locks.get(chunk)
+
     def drop(self, chunk: str) -> None:
         """Forget a chunk's lock (the peer left the chunk)."""
         self._locks.pop(chunk, None)

@@ -17,6 +17,8 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+from mapapi import limits
+from mapapi.commit_check import check_batch
 from mapapi.dht.announce import Announcements, Entry
 from mapapi.dht.ring import chunk_key
 from mapapi.errors import (
@@ -140,8 +142,7 @@ class Replicator:
         """Stage one chunk's revisions of a commit under a current lease."""
         body: CommitBatch = req.body
         self.locks.check(body.chunk, req.sender, body.token)
-        if any(r.chunk_id != body.chunk for r in body.revisions):
-            raise UsageError(f"commit batch for {body.chunk.short} carries revisions of others")
+        check_batch(self.store, body.chunk, body.record, body.revisions, req.sender)
         self._staged[(body.chunk, body.record.id)] = (body.record, list(body.revisions))
         return Ack()
 
@@ -289,7 +290,11 @@ class Replicator:
             # Only a holder we asked sends a chunk's state: anything else would
             # overwrite a replica (and its holder set) with what a stranger says.
             raise UsageError(f"chunk {part.chunk.short} was not asked for; part refused")
+        limits.parts(part.part, part.parts)
         parts = self._incoming.setdefault(part.chunk, [])
+        if parts and part.parts != parts[0].parts:
+            self._incoming.pop(part.chunk, None)
+            raise UsageError(f"chunk {part.chunk.short}: the parts disagree on their number")
         if part.part != len(parts):
             self._incoming.pop(part.chunk, None)
             raise UsageError(f"chunk {part.chunk.short}: part {part.part} out of order")

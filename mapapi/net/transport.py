@@ -23,8 +23,9 @@ from typing import Any, Protocol, cast
 import zmq
 import zmq.asyncio
 
+from mapapi import limits
 from mapapi.clock import LamportClock
-from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError
+from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError, UsageError
 from mapapi.ids import PeerId
 from mapapi.net import codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
@@ -33,7 +34,7 @@ from mapapi.net.stats import Stats
 
 log = logging.getLogger(__name__)
 
-DEFAULT_MAX_MESSAGE_SIZE = 64 * 1024 * 1024
+DEFAULT_MAX_MESSAGE_SIZE = limits.MAX_MESSAGE_BYTES
 """Larger messages are dropped and counted (and refused on send)."""
 
 _BATCH = 256  # messages drained per wake-up before other tasks get a turn
@@ -189,7 +190,7 @@ class ZmqTransport:
 
         Raises:
             PeerUnavailable: the transport is closed.
-            ValueError: `address` is not a valid zmq endpoint.
+            UsageError: `address` is not a valid zmq endpoint (a ValueError).
             ProtocolError: the encoded message exceeds `max_message_size`.
         """
         if self._closed:
@@ -266,18 +267,34 @@ class ZmqTransport:
             return sock
         if self._context is None:
             raise RuntimeError("transport not started")
+        if len(self._dealers) >= limits.MAX_LINKS:
+            # Addresses come from other peers (a hostile one may name thousands):
+            # close the oldest link rather than run out of file descriptors.
+            self._close_link(next(iter(self._dealers)))
         sock = self._socket(zmq.DEALER)
         try:
             sock.connect(address)
         except zmq.ZMQError as exc:
             sock.close(linger=0)
-            raise ValueError(f"not a peer address: {address!r} ({exc})") from exc
+            # A UsageError is a ValueError and a MapError: callers that handle a
+            # peer that cannot be reached handle an address from the wire that
+            # zmq refuses too.
+            raise UsageError(f"not a peer address: {address!r} ({exc})") from exc
         self._dealers[address] = sock
         self._dealer_readers[address] = self._spawn(
             self._read(sock, lambda frames: self._on_dealer_frames(address, frames)),
             f"dealer {address}",
         )
         return sock
+
+    def _close_link(self, address: str) -> None:
+        """Drop the link to `address` now: its reader stops, then its socket closes
+        (requests still waiting on it time out)."""
+        sock = self._dealers.pop(address)
+        task = self._dealer_readers.pop(address)
+        task.cancel()
+        task.add_done_callback(lambda _: sock.close(linger=0))
+        log.debug("closed the link to %s (more than %d links)", address, limits.MAX_LINKS)
 
     def _out(
         self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
