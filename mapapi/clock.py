@@ -4,17 +4,12 @@ from __future__ import annotations
 
 import threading
 
-from mapapi.limits import LAMPORT_CEILING
-
 
 class LamportClock:
     """A thread-safe Lamport clock.
 
     `tick()` stamps a local event, `merge()` folds in a time seen on a message
-    (`max(local, remote) + 1`), `now()` reads without advancing. A time from
-    elsewhere counts at most `limits.LAMPORT_CEILING`: a peer that sends an
-    absurd time cannot push this clock to where its own messages would be
-    refused (above `limits.MAX_LAMPORT`) or overflow.
+    (`max(local, remote) + 1`), `now()` reads without advancing.
     """
 
     def __init__(self, start: int = 0) -> None:
@@ -36,11 +31,10 @@ class LamportClock:
     def merge(self, remote: int) -> int:
         """Fold in a remote time: the clock becomes `max(local, remote) + 1`."""
         with self._lock:
-            self._time = max(self._time, min(remote, LAMPORT_CEILING)) + 1
+            self._time = max(self._time, remote) + 1
             return self._time
 
     def advance_to(self, time: int) -> None:
-        """Move forward to at least `time` (at most `LAMPORT_CEILING`) without
-        counting an event."""
+        """Move forward to at least `time` without counting an event."""
         with self._lock:
-            self._time = max(self._time, min(time, LAMPORT_CEILING))
+            self._time = max(self._time, time)

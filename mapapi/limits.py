@@ -30,10 +30,10 @@ MAX_LAMPORT = 1 << 62
 a commit record (a clock pushed to 2**64 could no longer stamp a message, and
 SQLite stores signed 64-bit integers)."""
 
-LAMPORT_CEILING = MAX_LAMPORT - (1 << 40)
-"""A received time moves a clock at most this far (`LamportClock.merge`), so a
-clock pushed there by an absurd time still has 2**40 events of its own before
-its times reach `MAX_LAMPORT`."""
+MAX_CLOCK_JUMP = 1 << 40
+"""How far ahead of the receiver's clock a message's Lamport time may be. A
+hostile peer cannot push a clock to `MAX_LAMPORT` (where the swarm would refuse
+its messages) with one message; a real peer is never 10**12 events ahead."""
 
 MAX_PAYLOAD_BYTES = 16 * 1024 * 1024
 """One item's serialized payload (one revision's data)."""
@@ -161,6 +161,19 @@ def lamport(what: str, value: int) -> int:
     if value > MAX_LAMPORT:
         raise LimitExceeded(f"{what} {value} exceeds the limit of 2**62 (MAX_LAMPORT)")
     return value
+
+
+def clock_jump(now: int, remote: int) -> None:
+    """Refuse a received Lamport time more than `MAX_CLOCK_JUMP` ahead of `now`.
+
+    Raises:
+        LimitExceeded: naming the limit.
+    """
+    if remote - now > MAX_CLOCK_JUMP:
+        raise LimitExceeded(
+            f"Lamport time {remote} is {remote - now} ahead of this peer's clock, more "
+            "than 2**40 (MAX_CLOCK_JUMP)"
+        )
 
 
 def ttl(value: float) -> float:

@@ -7,7 +7,8 @@ in batches (one awaited receive, then non-blocking receives until empty), decode
 and hands messages to a `Sink` (the RPC layer) without awaiting anything.
 
 This module is the one place that stamps the Lamport clock: `tick()` on every
-send, `merge()` on every decoded receive (DESIGN §4). It also counts traffic,
+send, `merge()` on every decoded receive (DESIGN §4), refusing a time more than
+`limits.MAX_CLOCK_JUMP` ahead of the clock. It also counts traffic,
 applies optional link shaping and drops malformed or oversized input, answering
 it with an ErrorReply when the request id can be recovered (DESIGN §11).
 """
@@ -25,7 +26,7 @@ import zmq.asyncio
 
 from mapapi import limits
 from mapapi.clock import LamportClock
-from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError, UsageError
+from mapapi.errors import LimitExceeded, NetworkError, PeerUnavailable, ProtocolError, UsageError
 from mapapi.ids import PeerId
 from mapapi.net import codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
@@ -392,7 +393,13 @@ class ZmqTransport:
         if env.kind is Kind.REPLY:
             self.stats.record_dropped(peer, "unexpected", size)
             return
-        self.clock.merge(env.lamport)
+        try:
+            self._merge(env.lamport)
+        except ProtocolError as exc:
+            self.stats.record_dropped(peer, "malformed", size)
+            if env.kind is Kind.REQUEST:  # a notification is never answered
+                self.reply(route, env.request_id, ErrorReply(exc.code, str(exc)))
+            return
         self.stats.record_received(peer, env.body_name, size)
         if self._sink is not None:
             self._sink.on_message(Inbound(env, Route(route.routing_id, peer), None, size))
@@ -414,6 +421,8 @@ class ZmqTransport:
         else:
             try:
                 env = codec.decode(data)
+                if env.kind is Kind.REPLY:
+                    self._merge(env.lamport)
             except ProtocolError as exc:
                 reason, error = "malformed", exc
         if error is not None:
@@ -425,10 +434,21 @@ class ZmqTransport:
         if env.kind is not Kind.REPLY:
             self.stats.record_dropped(address, "unexpected", size)
             return
-        self.clock.merge(env.lamport)
         self.stats.record_received(address, env.body_name, size)
         if self._sink is not None:
             self._sink.on_message(Inbound(env, None, address, size))
+
+    def _merge(self, lamport: int) -> None:
+        """Fold a received Lamport time into the clock (DESIGN §4).
+
+        Raises:
+            ProtocolError: the time is more than `limits.MAX_CLOCK_JUMP` ahead.
+        """
+        try:
+            limits.clock_jump(self.clock.now(), lamport)
+        except LimitExceeded as exc:
+            raise ProtocolError(str(exc)) from None
+        self.clock.merge(lamport)
 
 
 def _report_send(fut: asyncio.Future[object]) -> None:
