@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -67,3 +68,26 @@ def memory_peer() -> Iterator[Peer]:
     peer = Peer.in_memory()
     yield peer
     peer.store.close()
+
+
+@pytest.fixture
+async def raw_dealer() -> AsyncIterator[Callable[[str], Any]]:
+    """Factory of hand-driven zmq DEALER sockets (`zmq.asyncio.Socket`) connected to
+    an address, for sending a peer bytes no `Rpc` would; all closed after the test."""
+    import zmq
+    import zmq.asyncio
+
+    ctx = zmq.asyncio.Context()
+    sockets: list[zmq.asyncio.Socket] = []
+
+    def _connect(address: str) -> zmq.asyncio.Socket:
+        sock = ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.connect(address)
+        sockets.append(sock)
+        return sock
+
+    yield _connect
+    for sock in sockets:
+        sock.close(linger=0)
+    ctx.term()

@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import math
 import os
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import Awaitable, Callable
 
 import pytest
 import zmq
@@ -51,25 +51,6 @@ from .conftest import MakeRpc
 
 KEY = key_bytes(12345)
 REGION = BBox(0, 0, 0, 10, 10, 3)
-
-
-@pytest.fixture
-async def raw() -> AsyncIterator[Callable[[str], zmq.asyncio.Socket]]:
-    """Factory of raw DEALER sockets connected to an address; all closed after."""
-    ctx = zmq.asyncio.Context()
-    made: list[zmq.asyncio.Socket] = []
-
-    def connect(address: str) -> zmq.asyncio.Socket:
-        sock = ctx.socket(zmq.DEALER)
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.connect(address)
-        made.append(sock)
-        return sock
-
-    yield connect
-    for sock in made:
-        sock.close(linger=0)
-    ctx.term()
 
 
 async def _ask(sock: zmq.asyncio.Socket, env: Envelope) -> Envelope:
@@ -131,11 +112,11 @@ class TestDecodedLimits:
 
 class TestLamport:
     async def test_a_time_near_2_64_is_refused_and_not_merged(
-        self, make_rpc: MakeRpc, raw: Callable[[str], zmq.asyncio.Socket]
+        self, make_rpc: MakeRpc, raw_dealer: Callable[[str], zmq.asyncio.Socket]
     ) -> None:
         server = await make_rpc()
         server.register(Ping, lambda req: Pong())
-        sock = raw(server.address)
+        sock = raw_dealer(server.address)
         before = server.transport.clock.now()
         reply = await _ask(sock, _request(Ping(), lamport=2**64 - 1))
         assert isinstance(reply.body, ErrorReply)
@@ -144,11 +125,11 @@ class TestLamport:
         assert isinstance((await _ask(sock, _request(Ping(), request_id=8))).body, Pong)
 
     async def test_a_jump_beyond_max_clock_jump_is_refused(
-        self, make_rpc: MakeRpc, raw: Callable[[str], zmq.asyncio.Socket]
+        self, make_rpc: MakeRpc, raw_dealer: Callable[[str], zmq.asyncio.Socket]
     ) -> None:
         server = await make_rpc()
         server.register(Ping, lambda req: Pong())
-        sock = raw(server.address)
+        sock = raw_dealer(server.address)
         now = server.transport.clock.now()
         reply = await _ask(sock, _request(Ping(), lamport=now + limits.MAX_CLOCK_JUMP + 10))
         assert isinstance(reply.body, ErrorReply)
@@ -161,11 +142,11 @@ class TestLamport:
 
 class TestFrames:
     async def test_beyond_twice_the_limit_zmq_cuts_the_frame_before_python_sees_it(
-        self, make_rpc: MakeRpc, raw: Callable[[str], zmq.asyncio.Socket]
+        self, make_rpc: MakeRpc, raw_dealer: Callable[[str], zmq.asyncio.Socket]
     ) -> None:
         server = await make_rpc(max_message_size=1024)
         server.register(Ping, lambda req: Pong())
-        sock = raw(server.address)
+        sock = raw_dealer(server.address)
         await sock.send(codec.encode(_request(Ping(b"x" * 3000))))  # > MAXMSGSIZE (2048)
         # Had the frame reached Python, its ErrorReply would come first on this
         # link; zmq drops the link instead, and the DEALER connects again.
