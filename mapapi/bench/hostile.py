@@ -103,6 +103,7 @@ class Generator:
         self.pools = pools
         self.senders = senders
         self._next_id = rnd.randrange(1, 2**40)
+        self._hostile = 0.0  # chance that a field takes a hostile value (per `shot`)
 
     def shot(
         self,
