@@ -28,6 +28,13 @@ class UsageError(MapError, ValueError):
     exit_code = 2
 
 
+class LimitExceeded(UsageError):
+    """A message or value exceeds one of the limits in `mapapi.limits` (its
+    message names the limit); refused before anything is allocated for it."""
+
+    code = 3
+
+
 class RepoError(MapError):
     """A problem with the on-disk repository."""
 

@@ -181,6 +181,11 @@ class LockTable:
         """The chunks whose lock `writer` holds here."""
         return [c for c, lock in self._locks.items() if lock.grant and lock.grant.writer == writer]
 
+    def get(self, chunk: str) -> ChunkLock | None:
+        """A chunk's lock if it has one (without creating it: a message about a
+        chunk nobody locked here must leave no state behind)."""
+        return self._locks.get(chunk)
+
     def drop(self, chunk: str) -> None:
         """Forget a chunk's lock (the peer left the chunk)."""
         self._locks.pop(chunk, None)

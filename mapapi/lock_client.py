@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from mapapi.errors import LockNotHeld, LockTimeout, MapError, PeerUnavailable
 from mapapi.ids import ChunkId, PeerId
-from mapapi.lock import Grant, LockTable
+from mapapi.lock import ChunkLock, Grant, LockTable
 from mapapi.membership import Members
 from mapapi.net.messages import Ack, LockGrant, LockRequest, Unlock
 from mapapi.net.rpc import Request, Rpc
@@ -175,13 +175,25 @@ class LockService:
         Raises:
             LockNotHeld: the lease under `token` is gone (expired or released).
         """
-        grant = self.table[chunk].renew(writer, token, time.monotonic())
+        grant = self._existing(chunk, writer, token).renew(writer, token, time.monotonic())
         self._arm_timer(chunk)
         return grant
 
+    def _existing(self, chunk: ChunkId, writer: PeerId, token: int) -> ChunkLock:
+        """The chunk's lock; LockNotHeld if nobody ever locked it here."""
+        lock = self.table.get(chunk)
+        if lock is None:
+            raise LockNotHeld(
+                f"stale lock token {token} from {writer.short}: chunk {chunk.short} "
+                "was never locked here"
+            )
+        return lock
+
     async def release_local(self, chunk: ChunkId, writer: PeerId, token: int) -> None:
         """Release (token > 0) or withdraw (token 0) `writer`'s lock here."""
-        lock = self.table[chunk]
+        if token == 0 and self.table.get(chunk) is None:
+            return  # nothing to withdraw
+        lock = self._existing(chunk, writer, token)
         if token == 0:
             # The writer gave up before it saw a grant: a grant made meanwhile
             # is unused (its acquires take turns, so it holds nothing else here).
@@ -204,7 +216,7 @@ class LockService:
 
     def check(self, chunk: ChunkId, writer: PeerId, token: int) -> None:
         """Refuse a commit message whose lease is not current (LockNotHeld)."""
-        self.table[chunk].check(writer, token, time.monotonic())
+        self._existing(chunk, writer, token).check(writer, token, time.monotonic())
 
     async def wait_readable(self, chunk: ChunkId) -> None:
         """Wait while a writer holds the chunk (local reads must not see a

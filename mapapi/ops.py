@@ -12,7 +12,6 @@ from __future__ import annotations
 import inspect
 import json
 import os
-import re
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -20,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from mapapi.errors import ItemNotFound, PeerNotRunning, UsageError
 from mapapi.history import change_kind
 from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.limits import PEER_ADDRESS
 from mapapi.maps.operations import MapOperations
 from mapapi.transaction import Op
 from mapapi.transfer_ops import TransferOperations
@@ -34,11 +34,6 @@ if TYPE_CHECKING:
     from mapapi.workspace import View
 
 Json = Any
-
-# an endpoint, then a secure peer's public key (mapapi.security.ADDRESS_KEY)
-_ADDRESS = re.compile(
-    r"(tcp://(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]#]+):\d+|ipc://[^\s#]+)(#curve=[0-9a-fA-F]{64})?"
-)
 
 
 class Operations(WatchOperations, MapOperations, TransferOperations):
@@ -476,7 +471,7 @@ def check_address(address: str) -> str:
     Raises:
         UsageError: it does not.
     """
-    if not _ADDRESS.fullmatch(address):
+    if not PEER_ADDRESS.fullmatch(address):
         raise UsageError(
             f"bad peer address {address!r}: give what `mapctl peer start` printed, "
             "e.g. tcp://192.168.1.10:7000"

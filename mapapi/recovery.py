@@ -40,6 +40,7 @@ import logging
 from collections.abc import Coroutine, Sequence
 from typing import Any
 
+from mapapi.commit_check import check_batch
 from mapapi.errors import MapError, PeerUnavailable, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, PeerId
@@ -251,9 +252,11 @@ class Recovery:
         """Apply and drop the in-doubt batches here, and take `dead` out of the
         holder set (idempotent: a round that is run again changes nothing more)."""
         for batch in apply:
-            self.replicator.unstage(chunk, batch.record.id)
             if not self.replicator.applied_here(chunk, batch.record.id):
+                # as if its writer had sent it: an evictor must not write anything else
+                check_batch(self.store, chunk, batch.record, batch.revisions, batch.record.author)
                 self.replicator.apply_batch(batch.record, batch.revisions)
+            self.replicator.unstage(chunk, batch.record.id)
         for commit_id in drop:
             self.replicator.unstage(chunk, commit_id)
         holders = self.store.holders(chunk)

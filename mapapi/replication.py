@@ -18,7 +18,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from mapapi import faults
+from mapapi import faults, limits
+from mapapi.commit_check import check_batch
 from mapapi.dht.announce import Announcements, Entry
 from mapapi.dht.ring import chunk_key
 from mapapi.errors import (
@@ -154,8 +155,7 @@ class Replicator:
         stays pinned until the commit is applied or dropped (see `mapapi.lock`)."""
         body: CommitBatch = req.body
         self.locks.check(body.chunk, req.sender, body.token)
-        if any(r.chunk_id != body.chunk for r in body.revisions):
-            raise UsageError(f"commit batch for {body.chunk.short} carries revisions of others")
+        check_batch(self.store, body.chunk, body.record, body.revisions, req.sender)
         self.locks.pin(body.chunk, req.sender, body.token)
         self._staged[(body.chunk, body.record.id)] = Staged(
             req.sender, body.token, body.record, list(body.revisions)
@@ -335,7 +335,11 @@ class Replicator:
             # Only a holder we asked sends a chunk's state: anything else would
             # overwrite a replica (and its holder set) with what a stranger says.
             raise UsageError(f"chunk {part.chunk.short} was not asked for; part refused")
+        limits.parts(part.part, part.parts)
         parts = self._incoming.setdefault(part.chunk, [])
+        if parts and part.parts != parts[0].parts:
+            self._incoming.pop(part.chunk, None)
+            raise UsageError(f"chunk {part.chunk.short}: the parts disagree on their number")
         if part.part != len(parts):
             self._incoming.pop(part.chunk, None)
             raise UsageError(f"chunk {part.chunk.short}: part {part.part} out of order")

@@ -16,6 +16,7 @@ from mapapi.errors import (
     CorruptRepoError,
     MapError,
     NotARepoError,
+    RepoError,
     UsageError,
 )
 from mapapi.ids import PeerId
@@ -38,6 +39,10 @@ log = logging.getLogger(__name__)
 _SECURE_TOML = (
     "\n# A secure peer (CurveZMQ): its keypair and trust list are in .mapapi/curve/.\n"
     "[security]\nsecure = true\n"
+)
+_FIX_CONFIG = (
+    "fix it in an editor (`mapctl init` in an empty folder writes a valid one to compare) "
+    "or restore it from a backup"
 )
 
 
@@ -91,7 +96,7 @@ class RepoConfig:
                 secure=secure,
             )
         except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
-            raise CorruptRepoError(f"{source} is damaged: {exc}") from exc
+            raise CorruptRepoError(f"{source} is damaged: {exc}; {_FIX_CONFIG}") from exc
 
 
 @dataclass(frozen=True)
@@ -215,7 +220,12 @@ class Repository:
                 try:
                     text = config.read_text(encoding="utf-8")
                 except UnicodeDecodeError as exc:
-                    raise CorruptRepoError(f"{config} is damaged: {exc}") from exc
+                    raise CorruptRepoError(f"{config} is damaged: {exc}; {_FIX_CONFIG}") from exc
+                except OSError as exc:
+                    raise RepoError(
+                        f"cannot read {config}: {exc.strerror or exc}; check its owner and "
+                        "permissions (`ls -l`), or run mapctl as the user that owns the repository"
+                    ) from exc
                 return cls(folder, RepoConfig.from_toml(text, config))
         raise NotARepoError(
             f"not a map repository (or any parent): {here}; run `mapctl init` first"

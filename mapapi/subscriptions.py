@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 from google.protobuf import json_format, struct_pb2
 from google.protobuf.message import DecodeError
 
+from mapapi import limits
 from mapapi._pb.mapapi.v1 import lookup_pb2
 from mapapi.dht.announce import Announcements, Entry
 from mapapi.errors import MapError, UsageError
@@ -145,7 +146,8 @@ def decode_subscription(raw: bytes) -> lookup_pb2.Subscription:
     """A stored subscription.
 
     Raises:
-        ValueError: not one.
+        ValueError: not one, or one with a malformed region or more field filters
+            than `limits.MAX_COUNT["where"]` (every commit would evaluate them).
     """
     message = lookup_pb2.Subscription()
     try:
@@ -154,6 +156,8 @@ def decode_subscription(raw: bytes) -> lookup_pb2.Subscription:
         raise ValueError(f"not a subscription: {exc}") from exc
     if len(message.id) != 16 or len(message.subscriber) != 16 or not message.HasField("region"):
         raise ValueError("a subscription needs a 16-byte id, a subscriber and a region")
+    box_of(message.region)  # InvalidBBox (a ValueError) for NaN or inverted bounds
+    limits.count("where", len(message.where))
     return message
 
 
@@ -232,6 +236,7 @@ class Subscriptions:
 
         Raises:
             UsageError: not on the network, or the region lies outside the index.
+            LimitExceeded: more field filters than `limits.MAX_COUNT["where"]`.
         """
         if self.index is None:
             raise UsageError("subscriptions need the peer on the network; start it first")
@@ -239,6 +244,7 @@ class Subscriptions:
             raise UsageError(
                 f"the region lies outside the spatial index ({self.index.grid.describe()})"
             )
+        limits.count("where", len(spec.where))  # the committers would refuse it
         subscription = Subscription(os.urandom(16), spec)
         self.mine[subscription.id] = subscription
         await self.announced.add(subscription.id)
@@ -295,10 +301,16 @@ class Subscriptions:
             return 0
         pushes = []
         for sub_id, message in {m.id: m for m in _decoded(members)}.items():
-            spec = SubscriptionSpec.from_pb(message)
-            matched = tuple(
-                r for r, before, _ in placed if spec.matches(self._descriptor(r.table), r, before)
-            )
+            try:  # a malformed subscription (anyone may store one) must not fail a commit
+                spec = SubscriptionSpec.from_pb(message)
+                matched = tuple(
+                    r
+                    for r, before, _ in placed
+                    if spec.matches(self._descriptor(r.table), r, before)
+                )
+            except (MapError, ValueError) as exc:
+                log.warning("skipping subscription %s: %s", sub_id.hex()[:8], exc)
+                continue
             if matched:
                 pushes.append(self._push(sub_id, message, record, matched))
         await asyncio.gather(*pushes)

@@ -16,6 +16,7 @@ import logging
 import random
 from dataclasses import dataclass
 
+from mapapi import limits
 from mapapi.chunk_places import ChunkPlaces
 from mapapi.clock import LamportClock
 from mapapi.dht.chord import ChordNode
@@ -195,6 +196,8 @@ class Swarm:
                 "every peer needs the same [spatial] bounds and cells in .mapapi/config.toml "
                 "(set with `mapctl init --bounds ... --cells ...`)"
             )
+        if self.members.get(member.id) is None:
+            limits.count("members", len(self.members.all()) + 1)  # strangers with new ids
         self.members.add(member)
         self.members.touch(member.id)
         return Welcome(tuple(self.members.all()))

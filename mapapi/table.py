@@ -11,6 +11,7 @@ from google.protobuf.descriptor import FieldDescriptor
 from google.protobuf.descriptor_pool import Default as _default_pool
 from google.protobuf.message import DecodeError, Message
 
+from mapapi import limits
 from mapapi.errors import UsageError
 
 # Imported for their side effect: they register the built-in types in the pool.
@@ -73,13 +74,16 @@ class TableDescriptor:
         return str(self.message_type.DESCRIPTOR.full_name)
 
     def encode(self, message: Message) -> bytes:
-        """Serialize a payload; refuses a message of another type."""
+        """Serialize a payload; refuses a message of another type, or one larger
+        than `limits.MAX_PAYLOAD_BYTES` (LimitExceeded)."""
         if not isinstance(message, self.message_type):
             raise UsageError(
                 f"table {self.name!r} holds {self.type_name}, "
                 f"not {type(message).DESCRIPTOR.full_name}"
             )
-        return bytes(message.SerializeToString(deterministic=True))
+        data = bytes(message.SerializeToString(deterministic=True))
+        limits.payload(len(data))
+        return data
 
     def decode(self, data: bytes) -> Message:
         """Parse a stored payload."""

@@ -10,6 +10,7 @@ import asyncio
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -90,3 +91,26 @@ def memory_peer() -> Iterator[Peer]:
     peer = Peer.in_memory()
     yield peer
     peer.store.close()
+
+
+@pytest.fixture
+async def raw_dealer() -> AsyncIterator[Callable[[str], Any]]:
+    """Factory of hand-driven zmq DEALER sockets (`zmq.asyncio.Socket`) connected to
+    an address, for sending a peer bytes no `Rpc` would; all closed after the test."""
+    import zmq
+    import zmq.asyncio
+
+    ctx = zmq.asyncio.Context()
+    sockets: list[zmq.asyncio.Socket] = []
+
+    def _connect(address: str) -> zmq.asyncio.Socket:
+        sock = ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.connect(address)
+        sockets.append(sock)
+        return sock
+
+    yield _connect
+    for sock in sockets:
+        sock.close(linger=0)
+    ctx.term()

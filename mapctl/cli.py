@@ -61,5 +61,27 @@ def main() -> None:
         if isinstance(exc, MapError):
             click.secho(f"error: {exc}", fg="red", err=True)
             sys.exit(exc.exit_code)
+        outside = _outside_error(exc)
+        if outside is not None:
+            click.secho(f"error: {outside}", fg="red", err=True)
+            sys.exit(1)
         click.secho(f"internal error: {exc!r}; rerun with -v for the traceback", fg="red", err=True)
         sys.exit(1)
+
+
+def _outside_error(exc: Exception) -> str | None:
+    """One line for a failure of the files around mapctl rather than of mapctl:
+    a file it cannot open, or a store SQLite finds damaged while reading it."""
+    import sqlite3
+
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return (
+            f"cannot use {exc.filename}: {exc.strerror or exc}; check that it exists, "
+            "its owner and permissions"
+        )
+    if isinstance(exc, sqlite3.DatabaseError) and not isinstance(exc, sqlite3.IntegrityError):
+        return (
+            f"the repository's store (.mapapi/store.sqlite) failed: {exc}; if this persists, "
+            "restore it from a backup or clone the repository again"
+        )
+    return None

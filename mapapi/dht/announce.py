@@ -16,6 +16,7 @@ import logging
 from collections.abc import Callable, Hashable, Sequence
 from typing import TYPE_CHECKING, Generic, TypeVar
 
+from mapapi import limits
 from mapapi.errors import MapError, UsageError
 
 if TYPE_CHECKING:
@@ -51,8 +52,7 @@ class Announcements(Generic[K]):
         *,
         before_refresh: Callable[[], None] | None = None,
     ) -> None:
-        if not ttl > 0:
-            raise ValueError(f"a time-to-live is a positive number of seconds, got {ttl!r}")
+        limits.ttl(ttl)
         self.ttl = ttl
         self.chord: ChordNode | None = None
         self._entries_of = entries_of

@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable, Coroutine
 from typing import Any, NamedTuple, TypeVar
 
+from mapapi import limits
 from mapapi.dht import ring
 from mapapi.dht.storage import Storage
 from mapapi.errors import MapError, NetworkError, ProtocolError
@@ -390,10 +391,9 @@ class ChordNode:
 
         Raises:
             NetworkError: the key's owner could not be reached.
-            ValueError: `ttl` is not positive.
+            LimitExceeded: `ttl` is not in (0, limits.MAX_TTL] (a ValueError).
         """
-        if not ttl > 0:
-            raise ValueError(f"a time-to-live is a positive number of seconds, got {ttl!r}")
+        limits.ttl(ttl)
         await self._at_owner(key, ChordAdd(key_bytes(key), member, ttl), Ack)
 
     async def remove(self, key: int, member: bytes) -> None:
@@ -580,6 +580,9 @@ class ChordNode:
         """Store handed-over or replicated entries; with `replicate`, copy them on."""
         body: ChordStore = req.body
         now = self.clock()
+        for entry in body.entries:  # all checked before any is stored
+            key_from(entry.key)
+            limits.ttl(entry.ttl)
         for entry in body.entries:
             self.storage.add(key_from(entry.key), entry.member, entry.ttl, now)
         if body.replicate and body.entries:

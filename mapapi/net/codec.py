@@ -20,8 +20,9 @@ from typing import Any, Generic, TypeVar
 
 from google.protobuf.message import DecodeError
 
+from mapapi import limits
 from mapapi._pb.mapapi.v1 import wire_pb2
-from mapapi.errors import MapError, ProtocolError
+from mapapi.errors import LimitExceeded, MapError, ProtocolError
 from mapapi.ids import PeerId
 from mapapi.net import fields, messages
 
@@ -179,7 +180,9 @@ def decode(data: bytes) -> Envelope:
 
     Raises:
         ProtocolError: the bytes do not parse, a header field is missing or
-            invalid, or the body is absent or unknown to this version.
+            invalid (a Lamport time above `limits.MAX_LAMPORT`), the body is
+            absent or unknown to this version, or a field of it exceeds its
+            limit in `mapapi.limits` (checked before the body is built).
     """
     m = wire_pb2.Envelope()
     try:
@@ -189,6 +192,10 @@ def decode(data: bytes) -> Envelope:
     kind = _KINDS.get(m.kind)
     if kind is None:
         raise ProtocolError(f"envelope of unknown kind {m.kind}")
+    try:
+        limits.lamport("envelope Lamport time", m.lamport)
+    except LimitExceeded as exc:
+        raise ProtocolError(str(exc)) from None
     sender = _sender(m.sender)
     if kind is not Kind.NOTIFY and m.request_id == 0:
         raise ProtocolError(f"{kind.name.lower()} without a request id")

@@ -4,7 +4,9 @@ A body dataclass mirrors its wire message field by field (same names). Ids
 travel as 16 bytes (empty for None); `Revision` and `CommitRecord` use the
 storage codec; nested dataclasses (`Member`, `TableInfo`) and tuples of any of
 these recurse. Anything malformed on the way in raises ValueError, which the
-envelope decoder turns into ProtocolError.
+envelope decoder turns into ProtocolError; so does a field over its limit in
+`mapapi.limits` (`LimitExceeded` is a ValueError), checked on the protobuf
+message before any dataclass is built from it.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import typing
 from typing import Any
 
 from mapapi import codec as storage
+from mapapi import limits
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import Id
 
@@ -82,6 +85,7 @@ def read(cls: type, message: Any) -> Any:
 
     Raises:
         ValueError: an id has the wrong length or a nested value is invalid.
+        LimitExceeded: a field exceeds its limit (a ValueError too).
     """
     values: dict[str, Any] = {}
     for name, hint in _hints(cls).items():
@@ -89,18 +93,31 @@ def read(cls: type, message: Any) -> Any:
         raw = getattr(message, name)
         if typing.get_origin(kind) is tuple:
             (element,) = [a for a in typing.get_args(kind) if a is not Ellipsis]
+            limits.count(name, len(raw))
+            if element is str or element is bytes:
+                for item in raw:
+                    limits.field(name, item)
             values[name] = tuple(_read_value(element, item) for item in raw)
         elif isinstance(kind, type) and issubclass(kind, Id):
             values[name] = None if nullable and not raw else kind.from_bytes(raw)
         else:
+            if isinstance(raw, str | bytes):
+                limits.field(name, raw)
             values[name] = _read_value(kind, raw)
     return cls(**values)
 
 
 def _read_value(kind: type, raw: Any) -> Any:
     if kind is Revision:
+        limits.size("data", raw.data)
+        limits.size("table", raw.table)
+        limits.lamport("revision insert time", raw.insert_time)
+        limits.lamport("revision update time", raw.update_time)
         return storage.revision_from_pb(raw)
     if kind is CommitRecord:
+        limits.count("chunks", len(raw.chunks))
+        limits.size("message", raw.message)
+        limits.lamport("commit time", raw.time)
         return storage.commit_record_from_pb(raw)
     if dataclasses.is_dataclass(kind):
         return read(kind, raw)

@@ -17,7 +17,7 @@ import zmq
 import zmq.asyncio
 from zmq.utils.monitor import parse_monitor_message
 
-from mapapi.errors import AccessRefused
+from mapapi.errors import AccessRefused, UsageError
 from mapapi.net import curve
 from mapapi.security import Security, split_address
 
@@ -39,7 +39,7 @@ class Link:
 
         Raises:
             AccessRefused: the two peers cannot talk (`curve.check_link`).
-            ValueError: `address` is not a peer address.
+            UsageError: `address` is not a peer address.
         """
         endpoint, key = split_address(address)
         curve.check_link(address, endpoint, key, security)
@@ -51,7 +51,10 @@ class Link:
             sock.connect(endpoint)
         except zmq.ZMQError as exc:
             link.close()
-            raise ValueError(f"not a peer address: {address!r} ({exc})") from exc
+            # A UsageError is a ValueError and a MapError: callers that handle a
+            # peer that cannot be reached handle an address from the wire that
+            # zmq refuses too.
+            raise UsageError(f"not a peer address: {address!r} ({exc})") from exc
         return link
 
     async def watch(

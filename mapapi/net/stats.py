@@ -6,12 +6,19 @@ the totals (paper Fig. 6 compares bytes of triggers against polling), and
 `snapshot()` gives a JSON-ready view for `mapctl --json`.
 
 A peer key is the remote's address for links this peer opened (its requests and
-the replies to them) and the remote's PeerId for links the remote opened.
+the replies to them) and the remote's PeerId for links the remote opened. Once
+a table holds `limits.MAX_STATS_KEYS` keys, new peers are counted together
+under `OTHERS`, so senders with ever new ids cannot grow it without bound.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from mapapi import limits
+
+OTHERS = "(others)"
+"""The peer key of traffic from peers beyond `limits.MAX_STATS_KEYS`."""
 
 
 @dataclass(slots=True)
@@ -30,7 +37,11 @@ class Traffic:
 def _bump(table: dict[tuple[str, str], Traffic], key: tuple[str, str], size: int) -> None:
     t = table.get(key)
     if t is None:
-        t = table[key] = Traffic()
+        if len(table) >= limits.MAX_STATS_KEYS:  # strangers with ever new ids
+            key = (OTHERS, key[1])
+            t = table.get(key)
+        if t is None:
+            t = table[key] = Traffic()
     t.messages += 1
     t.bytes += size
 

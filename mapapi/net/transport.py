@@ -7,7 +7,8 @@ in batches (one awaited receive, then non-blocking receives until empty), decode
 and hands messages to a `Sink` (the RPC layer) without awaiting anything.
 
 This module is the one place that stamps the Lamport clock: `tick()` on every
-send, `merge()` on every decoded receive (DESIGN §4). It also counts traffic,
+send, `merge()` on every decoded receive (DESIGN §4), refusing a time more than
+`limits.MAX_CLOCK_JUMP` ahead of the clock. It also counts traffic,
 applies optional link shaping and drops malformed or oversized input, answering
 it with an ErrorReply when the request id can be recovered (DESIGN §11).
 
@@ -32,8 +33,9 @@ from typing import Any, Protocol, cast
 import zmq
 import zmq.asyncio
 
+from mapapi import limits
 from mapapi.clock import LamportClock
-from mapapi.errors import AccessRefused, NetworkError, PeerUnavailable, ProtocolError
+from mapapi.errors import AccessRefused, LimitExceeded, NetworkError, PeerUnavailable, ProtocolError
 from mapapi.ids import PeerId
 from mapapi.net import codec, curve
 from mapapi.net.codec import Envelope, ErrorReply, Kind
@@ -44,7 +46,7 @@ from mapapi.security import Security, keyed_address
 
 log = logging.getLogger(__name__)
 
-DEFAULT_MAX_MESSAGE_SIZE = 64 * 1024 * 1024
+DEFAULT_MAX_MESSAGE_SIZE = limits.MAX_MESSAGE_BYTES
 """Larger messages are dropped and counted (and refused on send)."""
 
 _BATCH = 256  # messages drained per wake-up before other tasks get a turn
@@ -214,7 +216,7 @@ class ZmqTransport:
 
         Raises:
             PeerUnavailable: the transport is closed.
-            ValueError: `address` is not a valid zmq endpoint.
+            UsageError: `address` is not a valid zmq endpoint (a ValueError).
             ProtocolError: the encoded message exceeds `max_message_size`.
         """
         if self._closed:
@@ -293,6 +295,10 @@ class ZmqTransport:
             return link.sock
         if self._context is None:
             raise RuntimeError("transport not started")
+        if len(self._dealers) >= limits.MAX_LINKS:
+            # Addresses come from other peers (a hostile one may name thousands):
+            # close the oldest link rather than run out of file descriptors.
+            self._close_link(next(iter(self._dealers)))
         link = Link.open(lambda: self._socket(zmq.DEALER), address, self.security)
         link.tasks = (
             self._spawn(
@@ -325,6 +331,18 @@ class ZmqTransport:
         zap.start()
         self._zap = zap
         self._spawn(zap.serve(), "zap")
+
+    def _close_link(self, address: str) -> None:
+        """Drop the link to `address` now: its tasks stop, then its socket closes
+        (requests still waiting on it time out)."""
+        link = self._dealers.pop(address)
+        for task in link.tasks:
+            task.cancel()
+        if link.tasks:
+            link.tasks[0].add_done_callback(lambda _: link.close())
+        else:
+            link.close()
+        log.debug("closed the link to %s (more than %d links)", address, limits.MAX_LINKS)
 
     def _out(
         self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
@@ -422,7 +440,13 @@ class ZmqTransport:
         if env.kind is Kind.REPLY:
             self.stats.record_dropped(peer, "unexpected", size)
             return
-        self.clock.merge(env.lamport)
+        try:
+            self._merge(env.lamport)
+        except ProtocolError as exc:
+            self.stats.record_dropped(peer, "malformed", size)
+            if env.kind is Kind.REQUEST:  # a notification is never answered
+                self.reply(route, env.request_id, ErrorReply(exc.code, str(exc)))
+            return
         self.stats.record_received(peer, env.body_name, size)
         if self._sink is not None:
             self._sink.on_message(Inbound(env, Route(route.routing_id, peer), None, size))
@@ -444,6 +468,8 @@ class ZmqTransport:
         else:
             try:
                 env = codec.decode(data)
+                if env.kind is Kind.REPLY:
+                    self._merge(env.lamport)
             except ProtocolError as exc:
                 reason, error = "malformed", exc
         if error is not None:
@@ -455,10 +481,21 @@ class ZmqTransport:
         if env.kind is not Kind.REPLY:
             self.stats.record_dropped(address, "unexpected", size)
             return
-        self.clock.merge(env.lamport)
         self.stats.record_received(address, env.body_name, size)
         if self._sink is not None:
             self._sink.on_message(Inbound(env, None, address, size))
+
+    def _merge(self, lamport: int) -> None:
+        """Fold a received Lamport time into the clock (DESIGN §4).
+
+        Raises:
+            ProtocolError: the time is more than `limits.MAX_CLOCK_JUMP` ahead.
+        """
+        try:
+            limits.clock_jump(self.clock.now(), lamport)
+        except LimitExceeded as exc:
+            raise ProtocolError(str(exc)) from None
+        self.clock.merge(lamport)
 
 
 def _report_send(fut: asyncio.Future[object]) -> None:

@@ -19,6 +19,7 @@ from mapapi.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageErr
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store.base import ChunkInfo, IdKind
+from mapapi.store.file_check import check_file, check_schema
 
 FORMAT = "mapapi-store"
 SCHEMA_VERSION = 1
@@ -53,21 +54,6 @@ _REV_COLUMNS = (
 )
 
 
-def _revision(row: sqlite3.Row | tuple) -> Revision:
-    item_id, table, chunk, data, inserted, updated, removed, author, commit = row
-    return Revision(
-        ItemId(item_id),
-        table,
-        ChunkId(chunk),
-        bytes(data),
-        inserted,
-        updated,
-        bool(removed),
-        PeerId(author),
-        CommitId(commit),
-    )
-
-
 def _scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     clauses: list[str] = []
     args: list[object] = []
@@ -87,16 +73,23 @@ class SqliteStore:
         """Open (or with `create`, create) the store at `path`.
 
         Raises:
-            CorruptRepoError: the file is not a SQLite database or not a mapapi store.
+            CorruptRepoError: the file is not a SQLite database, not a mapapi store,
+                of a newer store format, or lacks a table (`file_check`).
+            RepoError: the file cannot be read.
         """
         self.path = Path(path)
         if not create and not self.path.exists():
             raise CorruptRepoError(f"store file {self.path} is missing")
+        if self.path.exists() and (not create or self.path.stat().st_size):
+            check_file(self.path)
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._all_lock = threading.Lock()
         try:
             self._setup(create)
+        except CorruptRepoError:
+            self.close()
+            raise
         except sqlite3.DatabaseError as exc:
             self.close()
             raise CorruptRepoError(
@@ -119,9 +112,7 @@ class SqliteStore:
                     "('format', ?), ('version', ?), ('clock', '0')",
                     (FORMAT, str(SCHEMA_VERSION)),
                 )
-        row = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
-        if row is None or row[0] != FORMAT:
-            raise sqlite3.DatabaseError("no mapapi format marker")
+        check_schema(con, self.path, _SCHEMA, FORMAT, SCHEMA_VERSION)
 
     def _con(self) -> sqlite3.Connection:
         con: sqlite3.Connection | None = getattr(self._local, "con", None)
@@ -242,7 +233,7 @@ class SqliteStore:
             )
             .fetchone()
         )
-        return None if row is None else _revision(row)
+        return None if row is None else self._revision(row)
 
     def history(self, item_id: ItemId) -> list[Revision]:
         """All revisions of an item."""
@@ -250,7 +241,7 @@ class SqliteStore:
             f"SELECT {_REV_COLUMNS} FROM revisions WHERE item_id = ? ORDER BY update_time",
             (item_id,),
         )
-        return [_revision(r) for r in rows]
+        return [self._revision(r) for r in rows]
 
     def scan(
         self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
@@ -263,7 +254,7 @@ class SqliteStore:
             "  WHERE item_id = r.item_id AND update_time <= ?) "
             f"AND r.removed = 0{where} ORDER BY r.item_id"
         )
-        return [_revision(row) for row in self._con().execute(sql, [time, *args])]
+        return [self._revision(row) for row in self._con().execute(sql, [time, *args])]
 
     def latest(self, item_ids: Sequence[ItemId]) -> dict[ItemId, Revision]:
         """Newest revision per item."""
@@ -278,7 +269,7 @@ class SqliteStore:
                 "(SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)"
             )
             for row in con.execute(sql, batch):
-                revision = _revision(row)
+                revision = self._revision(row)
                 out[revision.item_id] = revision
         return out
 
@@ -291,7 +282,7 @@ class SqliteStore:
             f"SELECT {_REV_COLUMNS} FROM revisions r WHERE r.update_time > ?{where} "
             "ORDER BY r.update_time, r.item_id"
         )
-        return [_revision(row) for row in self._con().execute(sql, [time, *args])]
+        return [self._revision(row) for row in self._con().execute(sql, [time, *args])]
 
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
         """Write the record and its revisions in one SQL transaction."""
@@ -327,15 +318,41 @@ class SqliteStore:
                 (record.time,),
             )
 
+    def _revision(self, row: sqlite3.Row | tuple) -> Revision:
+        item_id, table, chunk, data, inserted, updated, removed, author, commit = row
+        try:
+            return Revision(
+                ItemId(item_id),
+                table,
+                ChunkId(chunk),
+                bytes(data),
+                inserted,
+                updated,
+                bool(removed),
+                PeerId(author),
+                CommitId(commit),
+            )
+        except (TypeError, ValueError) as exc:
+            raise self._damaged_row("revision", exc) from exc
+
+    def _damaged_row(self, what: str, exc: Exception) -> CorruptRepoError:
+        return CorruptRepoError(
+            f"a {what} in {self.path} is damaged: {exc}; restore the store from a backup "
+            "or clone the repository again"
+        )
+
     def _record(self, row: tuple) -> CommitRecord:
         cid, time, author, message, chunks = row
-        return CommitRecord(
-            CommitId(cid),
-            time,
-            PeerId(author),
-            message,
-            tuple(ChunkId(c) for c in chunks.split(",") if c),
-        )
+        try:
+            return CommitRecord(
+                CommitId(cid),
+                time,
+                PeerId(author),
+                message,
+                tuple(ChunkId(c) for c in chunks.split(",") if c),
+            )
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise self._damaged_row("commit record", exc) from exc
 
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
         """Newest first."""
@@ -363,7 +380,7 @@ class SqliteStore:
             f"SELECT {_REV_COLUMNS} FROM revisions WHERE commit_id = ? ORDER BY item_id",
             (commit_id,),
         )
-        return [_revision(r) for r in rows]
+        return [self._revision(r) for r in rows]
 
     def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
         """Ids starting with `prefix`."""
@@ -433,7 +450,7 @@ class SqliteStore:
             "ORDER BY item_id, update_time",
             (chunk_id,),
         )
-        return [_revision(r) for r in rows]
+        return [self._revision(r) for r in rows]
 
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """The records of every commit that wrote to a chunk, oldest first."""

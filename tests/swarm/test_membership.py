@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import random
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import Awaitable, Callable
 
 import pytest
 import zmq
@@ -72,25 +72,6 @@ _RAW_PEER = PeerId("0f" * 16)
 
 def _request(request_id: int, body: object) -> bytes:
     return codec.encode(Envelope(request_id, _RAW_PEER, 1, Kind.REQUEST, body))
-
-
-@pytest.fixture
-async def raw_dealer() -> AsyncIterator[Callable[[str], zmq.asyncio.Socket]]:
-    """Factory of hand-driven DEALER sockets connected to an address."""
-    ctx = zmq.asyncio.Context()
-    sockets: list[zmq.asyncio.Socket] = []
-
-    def _connect(address: str) -> zmq.asyncio.Socket:
-        sock = ctx.socket(zmq.DEALER)
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.connect(address)
-        sockets.append(sock)
-        return sock
-
-    yield _connect
-    for sock in sockets:
-        sock.close(linger=0)
-    ctx.term()
 
 
 class TestGarbage:
