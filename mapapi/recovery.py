@@ -56,6 +56,8 @@ from mapapi.net.messages import (
     Evicted,
     EvictGrant,
     EvictRequest,
+    Holders,
+    HoldersQuery,
     StagedBatch,
     Unlock,
 )
@@ -377,10 +379,18 @@ class Recovery:
         chunk: ChunkId = req.body.chunk
         holders = self.store.holders(chunk)
         if self.me in holders and req.sender in holders:
-            self._spawn(("rejoin", chunk), self._rejoin(chunk))
+            self._spawn(("rejoin", chunk), self._rejoin(chunk, req.sender))
         return Ack()
 
-    async def _rejoin(self, chunk: ChunkId) -> None:
+    async def _rejoin(self, chunk: ChunkId, evictor: PeerId) -> None:
+        """Fetch `chunk` again, once the evictor, asked at its own address, confirms
+        that this peer is no longer a holder (a forged notice changes nothing)."""
+        answer = await self.rpc.request(
+            self.members.address(evictor), HoldersQuery(chunk, None), expect=Holders
+        )
+        if self.me in {m.id for m in answer.holders} or not answer.holders:
+            log.info("ignored a notice of eviction from %s that it does not confirm", evictor)
+            return
         await self.replicator.participate(chunk, again=True)
         log.warning("fetched chunk %s again after being evicted from it", chunk.short)
 

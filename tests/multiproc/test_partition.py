@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -71,6 +71,15 @@ def history(repo: Path) -> list[str]:
     return [c["commit"] for c in mapctl_json(repo, "log")]
 
 
+def settle(predicate: Callable[[], bool], repos: list[Path]) -> None:
+    """`wait_until(predicate)` after the heal, failing with the peers' log tails."""
+    try:
+        wait_until(predicate, timeout=HEAL_TIMEOUT)
+    except AssertionError as exc:
+        tails = {r.name: r.joinpath(".mapapi", "peer.log").read_text()[-3000:] for r in repos}
+        raise AssertionError(f"{exc}; peer logs: {json.dumps(tails, indent=1)}") from None
+
+
 def increment(repo: Path, item: str) -> None:
     """Add 1 to the counter through `repo`'s daemon, retrying while holders do
     not answer (exit 5) until the eviction lets the commit through."""
@@ -106,13 +115,13 @@ def test_a_split_swarm_heals_with_nothing_lost(lan: Lan, daemons: Daemons) -> No
 
     lan.heal()
     agreed = history(majority[0])
-    wait_until(lambda: all(history(r) == agreed for r in repos), timeout=HEAL_TIMEOUT)
-    wait_until(
+    settle(lambda: all(history(r) == agreed for r in repos), repos)
+    settle(
         lambda: len(mapctl_json(repos[0], "chunk", "participate", chunk)["holders"]) == PEERS,
-        timeout=HEAL_TIMEOUT,
+        repos,
     )
     assert [value(r, item) for r in repos] == [3] * PEERS
 
     increment(minority[1], item)  # a peer that was cut off commits for everyone again
-    wait_until(lambda: len({tuple(history(r)) for r in repos}) == 1, timeout=HEAL_TIMEOUT)
+    settle(lambda: len({tuple(history(r)) for r in repos}) == 1, repos)
     assert [value(r, item) for r in repos] == [4] * PEERS
