@@ -26,7 +26,14 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from mapapi.clock import LamportClock
-from mapapi.errors import MapError, NetworkError, PeerNotRunning, PeerUnavailable, UsageError
+from mapapi.errors import (
+    DaemonDied,
+    MapError,
+    NetworkError,
+    PeerNotRunning,
+    PeerUnavailable,
+    UsageError,
+)
 from mapapi.ids import PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import ChunkList, ChunkListQuery, ChunkSummary, ControlCall, ControlResult
@@ -201,7 +208,7 @@ class RemoteOperations:
         try:
             while not (await asyncio.wait({reply}, timeout=ALIVE_CHECK))[0]:
                 if self.alive is not None and not self.alive():
-                    raise PeerUnavailable(
+                    raise DaemonDied(
                         f"{self.who} stopped while it ran `{op}` (it crashed or was killed); "
                         "start it again with `mapctl peer start`, then check with `mapctl log` "
                         "whether the operation took effect"

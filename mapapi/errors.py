@@ -180,6 +180,14 @@ class ProtocolError(NetworkError):
     code = 43
 
 
+class DaemonDied(PeerUnavailable):
+    """The peer daemon died (a crash, `kill -9`) while it ran an operation for this
+    client: whether the operation took effect is unknown until it runs again."""
+
+    retriable = False
+    code = 45
+
+
 class CommitUncertain(NetworkError):
     """A commit was applied at its writer, but too few holders confirmed it to
     know that it lasts: if the writer is cut off from the others, they decide
