@@ -98,6 +98,19 @@ async def _join_all(peer: Peer, seeds: Sequence[str]) -> None:
         raise failures[-1]
 
 
+async def _rejoin_any(peer: Peer, seeds: Sequence[str]) -> None:
+    """Rejoin the swarm through the first remembered member that answers (one is
+    enough: it tells this peer every other); if none does, the swarm may be gone,
+    so the peer serves alone and its commits to shared chunks say why they fail."""
+    for seed in seeds:
+        try:
+            await peer.join(seed)
+            return
+        except MapError as exc:
+            log.warning("rejoining through %s failed: %s", seed, exc)
+    log.warning("could not rejoin through any of the %d members it knew", len(seeds))
+
+
 async def serve(
     repo: Repository,
     listen: str = "tcp://127.0.0.1:0",
@@ -179,10 +192,7 @@ async def _go_live(
     if join:
         await _join_all(peer, join)
     elif recalled:
-        try:
-            await _join_all(peer, recalled)
-        except MapError as exc:  # the swarm may be gone: serve alone, commits say why
-            log.warning("could not rejoin through any member it knew: %s", exc)
+        await _rejoin_any(peer, recalled)
     endpoint = await control.start(repo)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
     repo.write_peer_record(record)

@@ -39,7 +39,14 @@ from typing import Any
 from mapapi.control import RemoteOperations
 from mapapi.daemon import daemon_command, spawn_detached, stop_daemon
 from mapapi.demo.swarm import LocalSwarm, SwarmPeer
-from mapapi.errors import CommitUncertain, ConflictError, DaemonDied, MapError, ViewClosedError
+from mapapi.errors import (
+    CommitUncertain,
+    ConflictError,
+    DaemonDied,
+    MapError,
+    PeerNotRunning,
+    ViewClosedError,
+)
 from mapapi.repo import Repository
 
 log = logging.getLogger(__name__)
@@ -69,6 +76,7 @@ class Tally:
     crashes: int = 0
     stops: int = 0
     restarts: int = 0
+    restart_s_max: float = 0.0  # the longest a restarted peer took to rejoin and serve
 
 
 @dataclass
@@ -190,8 +198,8 @@ class Soak:
             try:
                 await self._fresh_view(node, view)
                 await (self._stage_transfer(node, view) if transfer else self._stage(node, view))
-            except DaemonDied:
-                return  # nothing was committed
+            except (DaemonDied, PeerNotRunning):  # it died or stops: nothing was committed
+                return
             except MapError as exc:
                 if not exc.retriable:
                     raise
@@ -203,6 +211,8 @@ class Soak:
             except ConflictError:
                 tally.conflicts += 1
                 continue
+            except PeerNotRunning:  # it refused the commit: it is stopping
+                return
             except (DaemonDied, CommitUncertain):
                 if transfer:
                     tally.unknown_transfers += 1
@@ -269,20 +279,23 @@ class Soak:
             os.kill(record.pid, signal.SIGKILL)  # no goodbye, as a crash
             self.tally.crashes += 1
             log.info("soak: killed %s (pid %d)", node.repo.root.name, record.pid)
-        await self._disconnect(node)
+        # The client keeps its connection: a call in flight must end in DaemonDied
+        # (its outcome unknown), not in a closed connection that hides the commit.
 
     async def _leave(self, index: int) -> None:
         node = self.nodes[index]
-        node.up.clear()
-        await self._disconnect(node)
+        node.up.clear()  # the client finishes the operation it is in, then waits
         await asyncio.to_thread(stop_daemon, node.repo)
         self.tally.stops += 1
         log.info("soak: stopped %s", node.repo.root.name)
 
     async def _start(self, index: int) -> None:
         node = self.nodes[index]
+        await self._disconnect(node)
         argv = daemon_command(node.repo)  # no --join: it rejoins through the members it knew
+        began = time.monotonic()
         record = await asyncio.to_thread(spawn_detached, node.repo, argv)
+        self.tally.restart_s_max = max(self.tally.restart_s_max, time.monotonic() - began)
         who = f"the peer of {node.repo.root} (pid {record.pid})"
         node.ops = RemoteOperations(record.control, who, alive=node.repo.peer_locked)
         node.up.set()

@@ -584,6 +584,7 @@ def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_
     stop or restart.
     """
     import asyncio
+    import shutil
     import tempfile
 
     from mapapi.bench.soak import measure_soak
@@ -595,11 +596,17 @@ def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_
             f"{tally['crashes']} crashes, {tally['stops']} stops, {tally['restarts']} restarts"
         )
 
-    with tempfile.TemporaryDirectory(prefix="mapapi-soak-", dir=directory) as root:
-        result = asyncio.run(measure_soak(Path(root), peers, minutes * 60, seed, progress))
+    root = Path(tempfile.mkdtemp(prefix="mapapi-soak-", dir=directory))
+    try:
+        result = asyncio.run(measure_soak(root, peers, minutes * 60, seed, progress))
+    except BaseException:
+        render.note(f"soak: the peers' repositories and logs are kept in {root}")
+        raise
     _render("bench soak", result, as_json)
     if not result["invariants_ok"]:
+        render.note(f"soak: the peers' repositories and logs are kept in {root}")
         raise SystemExit(1)
+    shutil.rmtree(root, ignore_errors=True)
 
 
 @bench.command("plot")
