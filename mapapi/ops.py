@@ -155,7 +155,8 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
             rows = [{"id": c.chunk, "table": c.table, "items": c.items} for c in chunks]
         else:
             rows = [
-                {"id": c.id, "table": c.table, "items": c.items} for c in self.peer.chunks(table)
+                {"id": c.id, "table": c.table, "items": c.items, "holders": self.peer.holders(c.id)}
+                for c in self.peer.chunks(table)
             ]
         return {"chunks": rows}
 

@@ -263,12 +263,16 @@ class Soak:
             except TimeoutError:
                 pass
             down = [i for i, n in enumerate(self.nodes) if not n.up.is_set()]
-            if down:
-                await self._start(down[0])
-            elif self.rng.random() < 0.7:
-                await self._crash(self.rng.randrange(len(self.nodes)))
-            else:
-                await self._leave(self.rng.randrange(len(self.nodes)))
+            try:
+                if down:
+                    await self._start(down[0])
+                elif self.rng.random() < 0.7:
+                    await self._crash(self.rng.randrange(len(self.nodes)))
+                else:
+                    await self._leave(self.rng.randrange(len(self.nodes)))
+            except MapError as exc:  # reported; the node stays down and starts again later
+                self.errors.append(f"chaos: {type(exc).__name__}: {exc}")
+                log.warning("soak chaos: %s", exc)
             self._report()
 
     async def _crash(self, index: int) -> None:
@@ -285,8 +289,14 @@ class Soak:
     async def _leave(self, index: int) -> None:
         node = self.nodes[index]
         node.up.clear()  # the client finishes the operation it is in, then waits
-        await asyncio.to_thread(stop_daemon, node.repo)
         self.tally.stops += 1
+        try:
+            await asyncio.to_thread(stop_daemon, node.repo)
+        except MapError:
+            record = node.repo.running_peer()
+            if record is not None:  # it would not stop: end it, as a crash
+                os.kill(record.pid, signal.SIGKILL)
+            raise
         log.info("soak: stopped %s", node.repo.root.name)
 
     async def _start(self, index: int) -> None:
@@ -294,7 +304,7 @@ class Soak:
         await self._disconnect(node)
         argv = daemon_command(node.repo)  # no --join: it rejoins through the members it knew
         began = time.monotonic()
-        record = await asyncio.to_thread(spawn_detached, node.repo, argv)
+        record = await asyncio.to_thread(spawn_detached, node.repo, argv)  # kills one that hangs
         self.tally.restart_s_max = max(self.tally.restart_s_max, time.monotonic() - began)
         who = f"the peer of {node.repo.root} (pid {record.pid})"
         node.ops = RemoteOperations(record.control, who, alive=node.repo.peer_locked)

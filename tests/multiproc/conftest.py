@@ -56,6 +56,12 @@ def mapctl_json(repo: Path, *args: str, view: str = "main") -> Any:
     return json.loads(mapctl(repo, *args, "--json", view=view))
 
 
+def holders_of(repo: Path, chunk: str) -> list[str]:
+    """The holders of `chunk` as the peer of `repo` records them (`chunk list`)."""
+    rows = mapctl_json(repo, "chunk", "list")["chunks"]
+    return next(r["holders"] for r in rows if r["id"] == chunk)
+
+
 @dataclass
 class Daemon:
     """One started peer: its repository and what `peer start --json` printed."""

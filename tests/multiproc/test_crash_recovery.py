@@ -29,7 +29,15 @@ import pytest
 from mapapi import Repository
 from mapapi.testing import wait_until
 
-from .conftest import COMMAND_TIMEOUT, MAPCTL, Daemons, mapctl, mapctl_json, run_mapctl
+from .conftest import (
+    COMMAND_TIMEOUT,
+    MAPCTL,
+    Daemons,
+    holders_of,
+    mapctl,
+    mapctl_json,
+    run_mapctl,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -100,7 +108,7 @@ def test_a_writer_killed_mid_commit_holds_nothing_up_and_loses_nothing(
     assert survivors == history(b.repo)
     assert [m for _, m in survivors] == ["c = 2", "c = 1"]
     assert counter(a.repo, item) == counter(b.repo, item) == 2
-    holders = set(mapctl_json(a.repo, "chunk", "participate", chunk)["holders"])
+    holders = set(holders_of(a.repo, chunk))
     assert holders == {a.id, b.id}
 
     # w restarts on its repository without --join: it rejoins through the members
@@ -109,7 +117,7 @@ def test_a_writer_killed_mid_commit_holds_nothing_up_and_loses_nothing(
     wait_until(lambda: history(w.repo) == survivors, timeout=COMMAND_TIMEOUT)
     mapctl(w.repo, "view", "abort")  # the failed commit left its change staged in the view
     assert counter(w.repo, item) == 2
-    wait_until(lambda: w.id in mapctl_json(a.repo, "chunk", "participate", chunk)["holders"])
+    wait_until(lambda: w.id in holders_of(a.repo, chunk))
     mapctl(w.repo, "set", "counters", item, '{"name": "c", "value": 3}')
     mapctl(w.repo, "commit", "-m", "c = 3")
     assert history(a.repo) == history(b.repo) == history(w.repo)

@@ -25,7 +25,15 @@ import pytest
 
 from mapapi.testing import wait_until
 
-from .conftest import COMMAND_TIMEOUT, MAPCTL, Daemons, mapctl, mapctl_json, run_mapctl
+from .conftest import (
+    COMMAND_TIMEOUT,
+    MAPCTL,
+    Daemons,
+    holders_of,
+    mapctl,
+    mapctl_json,
+    run_mapctl,
+)
 from .netns import Lan
 
 pytestmark = pytest.mark.slow
@@ -103,7 +111,7 @@ def test_a_split_swarm_heals_with_nothing_lost(lan: Lan, daemons: Daemons) -> No
     minority = [repos[i] for i in MINORITY]
     for turn in range(3):
         increment(majority[turn % len(majority)], item)
-    holders = set(mapctl_json(majority[0], "chunk", "participate", chunk)["holders"])
+    holders = set(holders_of(majority[0], chunk))
     assert len(holders) == PEERS - len(MINORITY)
 
     # the minority cannot commit: a clear, retriable error, and nothing changes
@@ -117,7 +125,7 @@ def test_a_split_swarm_heals_with_nothing_lost(lan: Lan, daemons: Daemons) -> No
     agreed = history(majority[0])
     settle(lambda: all(history(r) == agreed for r in repos), repos)
     settle(
-        lambda: len(mapctl_json(repos[0], "chunk", "participate", chunk)["holders"]) == PEERS,
+        lambda: len(holders_of(repos[0], chunk)) == PEERS,
         repos,
     )
     assert [value(r, item) for r in repos] == [3] * PEERS
