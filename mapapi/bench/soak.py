@@ -193,7 +193,7 @@ class Soak:
 
     async def _one(self, node: Node, view: str, transfer: bool) -> None:
         """One increment or transfer, retried until it commits or its peer goes down."""
-        tally = self.tally
+        kind = "transfers" if transfer else "increments"
         while node.up.is_set() and not self._stop.is_set():
             try:
                 await self._fresh_view(node, view)
@@ -201,35 +201,33 @@ class Soak:
             except (DaemonDied, PeerNotRunning):  # it died or stops: nothing was committed
                 return
             except MapError as exc:
-                if not exc.retriable:
-                    raise
-                tally.retries += 1
-                await asyncio.sleep(BACKOFF)
+                await self._back_off(exc)
                 continue
             try:
-                await node.call("commit", view=view, message="transfer" if transfer else "+1")
+                await node.call("commit", view=view, message=kind)
             except ConflictError:
-                tally.conflicts += 1
+                self.tally.conflicts += 1
                 continue
             except PeerNotRunning:  # it refused the commit: it is stopping
                 return
             except (DaemonDied, CommitUncertain):
-                if transfer:
-                    tally.unknown_transfers += 1
-                else:
-                    tally.unknown_increments += 1
+                self._count(f"unknown_{kind}")
                 return
             except MapError as exc:
-                if not exc.retriable:
-                    raise
-                tally.retries += 1
-                await asyncio.sleep(BACKOFF)
+                await self._back_off(exc)
                 continue
-            if transfer:
-                tally.transfers += 1
-            else:
-                tally.increments += 1
+            self._count(kind)
             return
+
+    def _count(self, what: str) -> None:
+        setattr(self.tally, what, getattr(self.tally, what) + 1)
+
+    async def _back_off(self, exc: MapError) -> None:
+        """Wait a little before a retry; an error that no retry can cure is raised."""
+        if not exc.retriable:
+            raise exc
+        self.tally.retries += 1
+        await asyncio.sleep(BACKOFF)
 
     @staticmethod
     async def _fresh_view(node: Node, view: str) -> None:
