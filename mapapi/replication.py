@@ -34,6 +34,7 @@ from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.lock_client import Held, LockService
 from mapapi.membership import Members
+from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import (
     Ack,
     ChunkList,
@@ -60,6 +61,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 PART_REVISIONS = 5_000  # revisions per ChunkPart message
+PROBE_TIMEOUT = 2.0  # seconds a holder has to answer a ping before it is asked for a chunk
 Progress = Callable[[int, int], None]  # (parts received, parts in all)
 HOLDER_TTL = 30.0
 """Seconds a holder registration in the Chord index lives unless its owner refreshes it."""
@@ -424,6 +426,11 @@ class Replicator:
                         continue
                     tried.add(member.id)
                     try:
+                        # A quick probe first: the index may still list a holder that died
+                        # (its entry lives 30 s), and the request itself waits a long time.
+                        await self.rpc.request(
+                            member.address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong
+                        )
                         await self.rpc.request(
                             member.address, ParticipateRequest(chunk), timeout=60.0, expect=Ack
                         )

@@ -603,10 +603,12 @@ def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_
         render.note(f"soak: the peers' repositories and logs are kept in {root}")
         raise
     _render("bench soak", result, as_json)
-    if not result["invariants_ok"]:
+    if not result["invariants_ok"] or result["errors"]:
         render.note(f"soak: the peers' repositories and logs are kept in {root}")
+    else:
+        shutil.rmtree(root, ignore_errors=True)
+    if not result["invariants_ok"]:
         raise SystemExit(1)
-    shutil.rmtree(root, ignore_errors=True)
 
 
 @bench.command("plot")
