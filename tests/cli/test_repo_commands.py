@@ -109,10 +109,11 @@ class TestChunks:
         mapctl.json("set", "pts", "--chunk", first, '{"a": 1}')
         mapctl.commit()
         chunks = mapctl.json("chunk", "list")["chunks"]
+        holders = [str(Repository.find(mapctl.repo).config.peer_id)]  # this peer alone
         assert sorted(chunks, key=lambda c: c["id"]) == sorted(
             [
-                {"id": first, "table": "pts", "items": 1},
-                {"id": second, "table": "other", "items": 0},
+                {"id": first, "table": "pts", "items": 1, "holders": holders},
+                {"id": second, "table": "other", "items": 0, "holders": holders},
             ],
             key=lambda c: c["id"],
         )

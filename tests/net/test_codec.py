@@ -6,13 +6,14 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from mapapi import errors
+from mapapi import errors, limits
 from mapapi.errors import ConflictError, LockTimeout, MapError, ProtocolError
 from mapapi.ids import PeerId
 from mapapi.net import codec, messages
 from mapapi.net.codec import Envelope, ErrorReply, Kind, Ping, Pong
 
 U64 = st.integers(0, 2**64 - 1)
+LAMPORT = st.integers(0, limits.MAX_LAMPORT)  # above it an envelope is refused (test_limits)
 bodies = st.one_of(
     st.builds(Ping, st.binary(max_size=64)),
     st.builds(Pong, st.binary(max_size=64)),
@@ -22,7 +23,7 @@ envelopes = st.builds(
     Envelope,
     request_id=st.integers(1, 2**64 - 1),
     sender=st.binary(min_size=16, max_size=16).map(PeerId.from_bytes),
-    lamport=U64,
+    lamport=LAMPORT,
     kind=st.sampled_from(Kind),
     body=bodies,
 )
