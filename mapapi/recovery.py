@@ -173,12 +173,12 @@ class Recovery:
             batches = {
                 b.record.id: _wire(b.record, b.revisions) for b in self.replicator.staged(chunk)
             }
-            for peer, answer in zip(
-                others, await self._ask_all(others, EvictRequest(chunk, tuple(dead))), strict=True
-            ):
-                assert isinstance(answer, EvictGrant)
-                tokens[peer] = answer.token
-                batches.update((b.record.id, b) for b in answer.staged)
+            answers = await self._ask_each(others, EvictRequest(chunk, tuple(dead)))
+            for peer, answer in zip(others, answers, strict=True):
+                if isinstance(answer, EvictGrant):  # given back below if another refused
+                    tokens[peer] = answer.token
+                    batches.update((b.record.id, b) for b in answer.staged)
+            _raise_first(answers)
             apply, drop = await self._decide(chunk, batches, others)
             await self._ask_all(
                 others, lambda p: EvictCommit(chunk, tokens[p], tuple(dead), apply, drop)
@@ -205,21 +205,19 @@ class Recovery:
         Raises:
             MapError: the first failure, once every request has finished.
         """
-        results = await asyncio.gather(
-            *(
-                self.rpc.request(
-                    self.members.address(p),
-                    body(p) if callable(body) else body,
-                    timeout=self.locks.lock_timeout + 1.0,
-                )
-                for p in peers
-            ),
-            return_exceptions=True,
-        )
-        for result in results:
-            if isinstance(result, BaseException):
-                raise result
-        return results
+        answers = await self._ask_each(peers, body)
+        _raise_first(answers)
+        return answers
+
+    async def _ask_each(self, peers: Sequence[PeerId], body: Any) -> list[object]:
+        """`_ask_all`, with each failure in its place among the answers."""
+
+        async def ask(peer: PeerId) -> object:
+            message = body(peer) if callable(body) else body
+            timeout = self.locks.lock_timeout + 1.0
+            return await self.rpc.request(self.members.address(peer), message, timeout=timeout)
+
+        return await asyncio.gather(*(ask(p) for p in peers), return_exceptions=True)
 
     async def _decide(
         self, chunk: ChunkId, batches: dict[CommitId, StagedBatch], others: Sequence[PeerId]
@@ -401,6 +399,12 @@ class Recovery:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         self._tasks.clear()
+
+
+def _raise_first(answers: Sequence[object]) -> None:
+    for answer in answers:
+        if isinstance(answer, BaseException):
+            raise answer
 
 
 def _wire(record: CommitRecord, revisions: Sequence[Revision]) -> StagedBatch:
