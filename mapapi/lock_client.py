@@ -16,7 +16,13 @@ import time
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
-from mapapi.errors import LockNotHeld, LockTimeout, MapError, PeerUnavailable
+from mapapi.errors import (
+    LockNotHeld,
+    LockTimeout,
+    MapError,
+    NotParticipatingError,
+    PeerUnavailable,
+)
 from mapapi.ids import ChunkId, PeerId
 from mapapi.lock import ChunkLock, Grant, LockTable
 from mapapi.membership import Members
@@ -54,6 +60,8 @@ class LockService:
         # waiting out their deadline), and who settles an overdue pinned lease.
         self.is_down: Callable[[PeerId], bool] = lambda peer: False
         self.on_overdue: Callable[[ChunkId, Grant], None] | None = None
+        # Told when a holder refuses this peer as no holder of a chunk (it was evicted).
+        self.on_not_holder: Callable[[ChunkId, PeerId], None] | None = None
         self.members = members
         self.table = LockTable(lease)
         self.lock_timeout = lock_timeout
@@ -257,12 +265,17 @@ class LockService:
                 f"holder {holder.short} of chunk {chunk.short} does not answer; the other "
                 "holders evict it if they are a majority (then retry), or wait for it"
             )
-        reply = await self.rpc.request(
-            self.members.address(holder),
-            LockRequest(chunk),
-            timeout=self.lock_timeout + 1.0,
-            expect=LockGrant,
-        )
+        try:
+            reply = await self.rpc.request(
+                self.members.address(holder),
+                LockRequest(chunk),
+                timeout=self.lock_timeout + 1.0,
+                expect=LockGrant,
+            )
+        except NotParticipatingError:
+            if self.on_not_holder is not None:
+                self.on_not_holder(chunk, holder)
+            raise
         return reply.token
 
     async def _renew_one(self, chunk: ChunkId, holder: PeerId, token: int) -> None:

@@ -37,11 +37,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Coroutine, Sequence
 from typing import Any
 
 from mapapi.commit_check import check_batch
-from mapapi.errors import MapError, PeerUnavailable, UsageError
+from mapapi.errors import MapError, NotParticipatingError, PeerUnavailable, UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, CommitId, PeerId
 from mapapi.liveness import Liveness
@@ -67,6 +68,9 @@ from mapapi.replication import Replicator
 from mapapi.store.base import ReplicaStore
 
 log = logging.getLogger(__name__)
+
+REJOIN_PATIENCE = 120.0
+"""Seconds an evicted peer keeps trying to fetch a chunk again after it was told."""
 
 
 class Recovery:
@@ -100,6 +104,7 @@ class Recovery:
         ):
             rpc.register(body, handler)
         locks.on_overdue = self._overdue
+        locks.on_not_holder = self.not_holder
         liveness.on_tick = self.tick
         liveness.on_back = self._back
         liveness.also_watch = self._evicted.keys
@@ -178,6 +183,8 @@ class Recovery:
                 if isinstance(answer, EvictGrant):  # given back below if another refused
                     tokens[peer] = answer.token
                     batches.update((b.record.id, b) for b in answer.staged)
+                elif isinstance(answer, NotParticipatingError):
+                    self.not_holder(chunk, peer)  # we are the one who was evicted
             _raise_first(answers)
             apply, drop = await self._decide(chunk, batches, others)
             await self._ask_all(
@@ -371,6 +378,13 @@ class Recovery:
             self._evicted.setdefault(peer, set()).add(chunk)  # tell it when it is back again
             raise
 
+    def not_holder(self, chunk: ChunkId, holder: PeerId) -> None:
+        """`holder` refused this peer as no holder of `chunk`: it was evicted and
+        nobody told it (its evictor may be gone), so it fetches the chunk again
+        once `holder` confirms."""
+        if self.me in self.store.holders(chunk):
+            self._spawn(("rejoin", chunk), self._rejoin(chunk, holder))
+
     def rpc_evicted(self, req: Request) -> Ack:
         """A holder evicted this peer from a chunk while it did not answer: fetch
         the chunk again (its replica may lack commits, or hold undecided ones)."""
@@ -382,15 +396,27 @@ class Recovery:
 
     async def _rejoin(self, chunk: ChunkId, evictor: PeerId) -> None:
         """Fetch `chunk` again, once the evictor, asked at its own address, confirms
-        that this peer is no longer a holder (a forged notice changes nothing)."""
-        answer = await self.rpc.request(
-            self.members.address(evictor), HoldersQuery(chunk, None), expect=Holders
-        )
-        if self.me in {m.id for m in answer.holders} or not answer.holders:
-            log.info("ignored a notice of eviction from %s that it does not confirm", evictor)
+        that this peer is no longer a holder (a forged notice changes nothing).
+        Retried every round for `REJOIN_PATIENCE` seconds: right after a partition
+        heals, links may still come and go, and nobody sends the notice twice."""
+        deadline = time.monotonic() + REJOIN_PATIENCE
+        while True:
+            try:
+                answer = await self.rpc.request(
+                    self.members.address(evictor), HoldersQuery(chunk, None), expect=Holders
+                )
+                if self.me in {m.id for m in answer.holders} or not answer.holders:
+                    log.info("ignored a notice of eviction from %s it does not confirm", evictor)
+                    return
+                await self.replicator.participate(chunk, again=True)
+            except MapError as exc:
+                if time.monotonic() > deadline:
+                    raise
+                log.info("fetching chunk %s again failed (%s); retrying", chunk.short, exc)
+                await asyncio.sleep(self.retry)
+                continue
+            log.warning("fetched chunk %s again after being evicted from it", chunk.short)
             return
-        await self.replicator.participate(chunk, again=True)
-        log.warning("fetched chunk %s again after being evicted from it", chunk.short)
 
     async def close(self) -> None:
         """Stop every background task."""
