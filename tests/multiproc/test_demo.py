@@ -196,8 +196,9 @@ def test_an_interrupted_demo_stops_every_peer_it_started(tmp_path: Path, signum:
     assert any("stopped" in line for line in rest)
     for pid in pids:
         wait_until(lambda pid=pid: not alive(pid), timeout=10.0)
-    # also a peer whose start the signal cut short, which never said its pid
-    assert running_in(swarm) == []
+    # also a peer whose start the signal cut short, which never said its pid: the
+    # demo saw it let go of its lock, and it may take a moment more to exit
+    wait_until(lambda: running_in(swarm) == [], timeout=10.0)
     assert not swarm.exists()
 
 
