@@ -37,7 +37,7 @@ if TYPE_CHECKING:  # the network stack loads only for a peer on the network
 
 
 @dataclass
-class _Decision:
+class Decision:
     """What validation decided: the revisions to write under a new commit, or nothing."""
 
     record: CommitRecord | None
@@ -46,7 +46,7 @@ class _Decision:
 
 def _decide(
     store: Store, tx: Transaction, message: str, clock: LamportClock, try_merge: MergeFn | None
-) -> _Decision:
+) -> Decision:
     """Validate `tx` on the current replica and stamp its revisions (no writes).
 
     Raises:
@@ -57,11 +57,11 @@ def _decide(
     if conflicts:
         raise ConflictError(conflicts, tx, resolved_at=store.clock())
     if not accepted:
-        return _Decision(None, [])
+        return Decision(None, [])
     time = clock.tick()
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
     record = CommitRecord(CommitId.new(), time, tx.author, message, chunks)
-    return _Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
+    return Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
 
 
 def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
@@ -114,11 +114,12 @@ def commit_locally(
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
-) -> CommitRecord | None:
+) -> Decision:
     """Commit `tx` against `store` atomically (no swarm).
 
     Returns:
-        The commit record, or None when nothing was written.
+        The commit record (None when nothing was written) with the revisions
+        written, so the caller need not read them back from the store.
 
     Raises:
         ConflictError: with (base, ours, theirs) for every conflicting item.
@@ -128,7 +129,7 @@ def commit_locally(
         if decision.record is not None:
             store.apply_commit(decision.record, decision.revisions)
     tx.committed(decision.revisions)
-    return decision.record
+    return decision
 
 
 def _check_confirmed(
@@ -188,7 +189,7 @@ async def commit_distributed(
     from mapapi.lock_client import Held
 
     held: list[Held] = []
-    decision = _Decision(None, [])
+    decision = Decision(None, [])
     pushed = False
     try:
         for chunk in _chunks_to_lock(store, tx):

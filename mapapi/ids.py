@@ -33,7 +33,8 @@ class Id(str):
     @classmethod
     def new(cls) -> Self:
         """A fresh random id."""
-        return cls(secrets.token_hex(16))
+        # token_hex is 32 lowercase hex digits by construction: no need to check it
+        return str.__new__(cls, secrets.token_hex(16))
 
     @classmethod
     def from_bytes(cls, raw: bytes) -> Self:

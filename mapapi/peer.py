@@ -408,10 +408,10 @@ class Peer:
                 after=self._committed,
             )
         self._refuse_shared(tx)
-        record = commit_locally(self.store, tx, message, self.clock, self._try_merge)
-        if record is not None:
-            await self._committed(record, self.store.commit_revisions(record.id))
-        return record
+        done = commit_locally(self.store, tx, message, self.clock, self._try_merge)
+        if done.record is not None:
+            await self._committed(done.record, done.revisions)
+        return done.record
 
     async def _committed(self, record: CommitRecord, revisions: list[Revision]) -> None:
         """What follows a commit of this peer, applied everywhere and (in a swarm)
