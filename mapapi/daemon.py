@@ -98,17 +98,54 @@ async def _join_all(peer: Peer, seeds: Sequence[str]) -> None:
         raise failures[-1]
 
 
+SEED_PROBE_TIMEOUT = 2.0
+"""Seconds a restarted daemon waits for the members it remembers to answer a ping."""
+
+
 async def _rejoin_any(peer: Peer, seeds: Sequence[str]) -> None:
-    """Rejoin the swarm through the first remembered member that answers (one is
-    enough: it tells this peer every other); if none does, the swarm may be gone,
-    so the peer serves alone and its commits to shared chunks say why they fail."""
-    for seed in seeds:
+    """Rejoin the swarm through a remembered member (one is enough: it tells this
+    peer every other), the first to answer a ping first; if none does, the swarm
+    may be gone, so the peer serves alone and its commits to shared chunks say
+    why they fail."""
+    for seed in await _first_to_answer(peer, seeds):
         try:
             await peer.join(seed)
             return
         except MapError as exc:
             log.warning("rejoining through %s failed: %s", seed, exc)
     log.warning("could not rejoin through any of the %d members it knew", len(seeds))
+
+
+async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
+    """`seeds` with the first one to answer a ping moved to the front.
+
+    All are pinged at once: remembered members that since stopped, or restarted on
+    other ports, would otherwise each cost a join's whole timeout in turn.
+    """
+    from mapapi.net.codec import Ping, Pong
+
+    assert peer.swarm is not None
+    rpc = peer.swarm.rpc
+
+    async def ping(seed: str) -> str:
+        await rpc.request(seed, Ping(), timeout=SEED_PROBE_TIMEOUT, expect=Pong)
+        return seed
+
+    pings = [asyncio.create_task(ping(seed)) for seed in seeds]
+    first: str | None = None
+    try:
+        for answer in asyncio.as_completed(pings):
+            with contextlib.suppress(MapError):
+                first = await answer
+                break
+    finally:
+        for task in pings:
+            task.cancel()
+        await asyncio.gather(*pings, return_exceptions=True)
+    for seed in seeds:
+        if seed != first:
+            await rpc.forget(seed)  # no reconnecting socket to a member that moved
+    return list(seeds) if first is None else [first, *(s for s in seeds if s != first)]
 
 
 async def serve(

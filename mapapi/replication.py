@@ -412,7 +412,7 @@ class Replicator:
         try:
             last: MapError | None = None
             indexed = await self._find_in_index(chunk)
-            tried: set[PeerId] = set()
+            tried: set[str] = set()
             for lookup in (indexed, None):  # the index's holders, then the members' answer
                 if lookup is None:
                     try:
@@ -422,21 +422,13 @@ class Replicator:
                             raise
                         break
                 for member in lookup.holders:
-                    if member.id in tried or member.id == self.me:
+                    if member.id == self.me:
                         continue
-                    tried.add(member.id)
                     try:
-                        # A quick probe first: the index may still list a holder that died
-                        # (its entry lives 30 s), and the request itself waits a long time.
-                        await self.rpc.request(
-                            member.address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong
-                        )
-                        await self.rpc.request(
-                            member.address, ParticipateRequest(chunk), timeout=60.0, expect=Ack
-                        )
+                        if not await self._ask_to_participate(chunk, member, tried):
+                            continue  # asked at these addresses already
                     except MapError as exc:
                         last = exc
-                        log.warning("participating in %s via %s failed: %s", chunk, member.id, exc)
                         continue
                     await self.register(chunk)
                     if self.places is not None:
@@ -449,6 +441,41 @@ class Replicator:
             if not self._wanted[chunk]:
                 del self._wanted[chunk]
                 self._incoming.pop(chunk, None)
+
+    async def _ask_to_participate(self, chunk: ChunkId, holder: Member, tried: set[str]) -> bool:
+        """Ask `holder` to make this peer a holder of `chunk` (it sends the chunk),
+        at each of its addresses not in `tried` (added to it).
+
+        Returns:
+            True once one accepted; False if every address was in `tried`.
+
+        Raises:
+            MapError: the last address's error, when none accepted.
+        """
+        last: MapError | None = None
+        for address in self._addresses(holder):
+            if address in tried:
+                continue
+            tried.add(address)
+            try:
+                # A quick probe first: the index may still list a holder that died
+                # (its entry lives 30 s), and the request itself waits a long time.
+                await self.rpc.request(address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong)
+                await self.rpc.request(address, ParticipateRequest(chunk), timeout=60.0, expect=Ack)
+                return True
+            except MapError as exc:
+                last = exc
+                log.warning("participating in %s via %s failed: %s", chunk, holder.id, exc)
+        if last is not None:
+            raise last
+        return False
+
+    def _addresses(self, holder: Member) -> list[str]:
+        """Where to ask `holder`: first where the member list says it serves, then
+        where a lookup said. A holder that restarted serves on another port, and
+        the index keeps its old address for as long as the entry lives."""
+        known = self.members.get(holder.id)
+        return list(dict.fromkeys([*([known.address] if known else []), holder.address]))
 
     async def leave(self, chunk: ChunkId, force: bool = False, *, keep: bool = False) -> None:
         """Stop holding `chunk`: tell the other holders under the lock, drop it here.

@@ -30,6 +30,7 @@ import logging
 import os
 import random
 import signal
+import statistics
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -76,7 +77,7 @@ class Tally:
     crashes: int = 0
     stops: int = 0
     restarts: int = 0
-    restart_s_max: float = 0.0  # the longest a restarted peer took to rejoin and serve
+    restart_s: list[float] = field(default_factory=list)  # each restart until it served
 
 
 @dataclass
@@ -135,7 +136,8 @@ class Soak:
             "commits": self.tally.increments + self.tally.transfers,
             "crashes": self.tally.crashes,
             "restarts": self.tally.restarts,
-            **asdict(self.tally),
+            **{k: v for k, v in asdict(self.tally).items() if k != "restart_s"},
+            **_spread("restart_s", self.tally.restart_s),
             "errors": self.errors,
             "peers": len(self.nodes),
             "seconds": round(time.monotonic() - started, 1),
@@ -303,7 +305,7 @@ class Soak:
         argv = daemon_command(node.repo)  # no --join: it rejoins through the members it knew
         began = time.monotonic()
         record = await asyncio.to_thread(spawn_detached, node.repo, argv)  # kills one that hangs
-        self.tally.restart_s_max = max(self.tally.restart_s_max, time.monotonic() - began)
+        self.tally.restart_s.append(time.monotonic() - began)
         who = f"the peer of {node.repo.root} (pid {record.pid})"
         node.ops = RemoteOperations(record.control, who, alive=node.repo.peer_locked)
         node.up.set()
@@ -385,3 +387,13 @@ async def measure_soak(
 ) -> dict[str, Any]:
     """One soak run in the empty folder `root` (see the module docstring)."""
     return await Soak(root, peers, seconds, seed, progress).run()
+
+
+def _spread(name: str, seconds: list[float]) -> dict[str, float | None]:
+    """The median and the longest of `seconds`, as `NAME_median` and `NAME_max`."""
+    if not seconds:
+        return {f"{name}_median": None, f"{name}_max": None}
+    return {
+        f"{name}_median": round(statistics.median(seconds), 2),
+        f"{name}_max": round(max(seconds), 2),
+    }

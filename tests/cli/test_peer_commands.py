@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from mapapi import Repository
+from mapapi import Repository, known_peers
 from mapapi.control import endpoints
 from mapapi.daemon import advertised_address, stop_daemon
 from mapapi.repo import PeerRecord
@@ -212,6 +212,25 @@ class TestThroughTheDaemon:
             assert members == {"bench", "other"}
             peers = await daemon.json("peers")
             assert [p["name"] for p in peers["peers"]] == ["other"]
+        finally:
+            await other.close()
+
+    async def test_a_restart_rejoins_through_the_member_that_answers(
+        self, daemon: InProcessDaemon, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    ) -> None:
+        assert daemon.record is not None
+        # Nothing listens on port 1, and its address sorts before the live one: tried
+        # in turn, it would cost a join's whole timeout before the live member.
+        gone = "tcp://127.0.0.1:1"
+        other_repo = Repository.init(tmp_path / "other", "other")
+        known_peers.remember(other_repo, [daemon.record.join, gone])
+        assert known_peers.recall(other_repo) == [gone, daemon.record.join]
+        other = InProcessDaemon(other_repo.root)
+        await other.start()
+        try:
+            peers = await other.json("peers")
+            assert [p["name"] for p in peers["peers"]] == ["bench"]
+            assert not [r for r in caplog.records if gone in r.getMessage()]
         finally:
             await other.close()
 

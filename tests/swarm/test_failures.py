@@ -16,6 +16,7 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 import pytest
 
 from mapapi import faults
+from mapapi.dht.ring import chunk_key
 from mapapi.errors import CommitUncertain, MapError, PeerUnavailable, RequestTimeout
 from mapapi.history import CommitRecord
 from mapapi.ids import ChunkId, ItemId
@@ -23,6 +24,7 @@ from mapapi.liveness import LivenessOptions
 from mapapi.net.messages import CommitApply
 from mapapi.net.rpc import Request
 from mapapi.peer import Peer
+from mapapi.replication import encode_holder
 from mapapi.repo import Repository
 from mapapi.testing import until
 
@@ -283,3 +285,28 @@ class TestRestart:
         await until(lambda: all(back.id in p.holders(chunk) for p in everyone))
         await add_one_retrying(back, item)
         await assert_identical(everyone, chunk, item, 6)
+
+    async def test_a_holder_that_restarted_is_asked_where_it_serves_now(
+        self, start: Start, make_repo: Callable[..., Repository]
+    ) -> None:
+        repos = [make_repo(), make_repo()]
+        first = await start(repos[0])
+        chunk, item = await counter_chunk(first)
+        await add_one(first, item)
+        newcomer = await start(repos[1], first.address)
+        before = first.address
+        key, stale = chunk_key(chunk), encode_holder(net(first).members.me)
+        ring = net(newcomer).chord
+        await until(lambda: stale in ring.storage.get(key, ring.clock()))  # a replica
+        await crash(first)
+        back = await start(repos[0], newcomer.address)  # a new port, told to newcomer
+        assert back.address != before
+        # Leave the index naming only the address of before the restart, as it
+        # does until that entry expires (30 s) whenever it sorts after the new one.
+        await net(back).replicator.unregister(chunk)
+        indexed = await net(newcomer).replicator._find_in_index(chunk)
+        assert indexed is not None
+        assert [(m.id, m.address) for m in indexed.holders] == [(back.id, before)]
+        await newcomer.participate(chunk)
+        assert await value(newcomer, item) == 1
+        assert sorted(newcomer.holders(chunk)) == sorted([back.id, newcomer.id])
