@@ -229,6 +229,7 @@ async def _go_live(
     if join:
         await _join_all(peer, join)
     elif recalled:
+        log.info("rejoining through the %d members it remembers", len(recalled))
         await _rejoin_any(peer, recalled)
     endpoint = await control.start(repo)
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
