@@ -548,18 +548,32 @@ class ChordNode:
     async def rpc_add(self, req: Request) -> Ack:
         """Add a member, atomically here; the owner copies it down the successor list."""
         body: ChordAdd = req.body
-        self.storage.add(key_from(body.key), body.member, body.ttl, self.clock())
+        key = key_from(body.key)
+        self.storage.add(key, body.member, body.ttl, self.clock())
         if not body.replica:
-            await self._replicate(ChordAdd(body.key, body.member, body.ttl, replica=True))
+            copy = ChordAdd(body.key, body.member, body.ttl, replica=True)
+            await self._replicate(copy, self._copy_targets(key))
         return Ack()
 
     async def rpc_remove(self, req: Request) -> Ack:
         """Remove a member here; the owner copies the removal down the successor list."""
         body: ChordRemove = req.body
-        self.storage.remove(key_from(body.key), body.member)
+        key = key_from(body.key)
+        self.storage.remove(key, body.member)
         if not body.replica:
-            await self._replicate(ChordRemove(body.key, body.member, replica=True))
+            copy = ChordRemove(body.key, body.member, replica=True)
+            await self._replicate(copy, self._copy_targets(key))
         return Ack()
+
+    def _copy_targets(self, key: int) -> list[Node]:
+        """Where an update of `key` sent here goes on: the successor list, and the
+        predecessor if that owns the key. A lookup through routes that predate a
+        join ends here, at the joiner's successor, after this node handed the
+        joiner its keys (`rpc_notify`): without the copy the owner would miss it."""
+        pred = self.predecessor
+        if pred is None or self._owns(key):
+            return list(self.successors)
+        return [pred, *self.successors]
 
     def rpc_get(self, req: Request) -> ChordValues:
         """The live members of a key stored here (those the filter keeps, if any)."""

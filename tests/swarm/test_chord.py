@@ -16,9 +16,10 @@ from typing import Any
 
 import pytest
 
-from mapapi.dht.chord import ChordNode
+from mapapi.dht.chord import ChordNode, key_bytes
 from mapapi.dht.ring import SortedRing, chunk_key
 from mapapi.ids import ChunkId, PeerId
+from mapapi.net.messages import Ack, ChordAdd, ChordRemove
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 
@@ -302,6 +303,24 @@ class TestValues:
         await asyncio.gather(*(node.remove(key, members[node.key][0]) for node in nodes))
         left = everything - {ms[0] for ms in members.values()}
         assert await nodes[3].get(key) == left
+
+    async def test_an_update_sent_to_the_old_owner_reaches_the_new_one(
+        self, make_ring: MakeRing
+    ) -> None:
+        """A lookup through routes older than a join ends at the joiner's successor,
+        which handed the joiner its keys already: the update must still reach it."""
+        nodes = await make_ring(8)
+        oracle = SortedRing(n.key for n in nodes)
+        by_key = {n.key: n for n in nodes}
+        joiner = nodes[5]
+        old_owner = by_key[oracle.successor(joiner.key + 1)]
+        sender = next(n for n in nodes if n not in (joiner, old_owner))
+        key = joiner.key  # the joiner's own key: it owns it
+        for body in (ChordAdd(key_bytes(key), b"late", 600), ChordRemove(key_bytes(key), b"late")):
+            await sender.rpc.request(old_owner.me.address, body, expect=Ack)
+            wanted = {b"late"} if isinstance(body, ChordAdd) else set()
+            assert joiner.storage.get(key, joiner.clock()) == wanted
+            assert await sender.get(key) == wanted
 
     async def test_a_member_not_refreshed_expires(self, make_ring: MakeRing) -> None:
         now = [1000.0]
