@@ -123,6 +123,7 @@ async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
     other ports, would otherwise each cost a join's whole timeout in turn.
     """
     from mapapi.net.codec import Ping, Pong
+    from mapapi.net.rpc import first_answer
 
     assert peer.swarm is not None
     rpc = peer.swarm.rpc
@@ -131,17 +132,7 @@ async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
         await rpc.request(seed, Ping(), timeout=SEED_PROBE_TIMEOUT, expect=Pong)
         return seed
 
-    pings = [asyncio.create_task(ping(seed)) for seed in seeds]
-    first: str | None = None
-    try:
-        for answer in asyncio.as_completed(pings):
-            with contextlib.suppress(MapError):
-                first = await answer
-                break
-    finally:
-        for task in pings:
-            task.cancel()
-        await asyncio.gather(*pings, return_exceptions=True)
+    first = await first_answer([ping(seed) for seed in seeds])
     for seed in seeds:
         if seed != first:
             await rpc.forget(seed)  # no reconnecting socket to a member that moved

@@ -51,7 +51,7 @@ from mapapi.net.messages import (
     ParticipateRequest,
     TableInfo,
 )
-from mapapi.net.rpc import Request, Rpc
+from mapapi.net.rpc import Request, Rpc, first_answer
 from mapapi.store.base import ReplicaStore
 
 if TYPE_CHECKING:
@@ -615,22 +615,10 @@ class Replicator:
         others = self.members.others()
         if not others:
             raise NoPeersError("this peer knows no other peer; `mapctl join ADDR` first")
-        pending = [
-            asyncio.ensure_future(self.rpc.request(s.member.address, query, expect=Holders))
-            for s in others
-        ]
-        try:
-            for next_done in asyncio.as_completed(pending):
-                try:
-                    answer = await next_done
-                except MapError:
-                    continue
-                if answer.holders:
-                    return answer
-        finally:
-            for fut in pending:
-                fut.cancel()
-            await asyncio.gather(*pending, return_exceptions=True)
+        asks = [self.rpc.request(s.member.address, query, expect=Holders) for s in others]
+        answer = await first_answer(asks, lambda holders: bool(holders.holders))
+        if answer is not None:
+            return answer
         what = f"chunk {query.chunk}" if query.chunk else f"item {query.item}"
         raise ChunkNotFound(f"no known peer holds {what}")
 

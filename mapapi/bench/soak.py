@@ -131,13 +131,15 @@ class Soak:
                 if node.ops is not None:
                     await node.ops.close()
             await asyncio.to_thread(self.swarm.stop)
+        restarts = self.tally.restart_s
         return {
             **checked,
             "commits": self.tally.increments + self.tally.transfers,
             "crashes": self.tally.crashes,
             "restarts": self.tally.restarts,
             **{k: v for k, v in asdict(self.tally).items() if k != "restart_s"},
-            **_spread("restart_s", self.tally.restart_s),
+            "restart_s_median": round(statistics.median(restarts), 2) if restarts else None,
+            "restart_s_max": round(max(restarts), 2) if restarts else None,
             "errors": self.errors,
             "peers": len(self.nodes),
             "seconds": round(time.monotonic() - started, 1),
@@ -387,13 +389,3 @@ async def measure_soak(
 ) -> dict[str, Any]:
     """One soak run in the empty folder `root` (see the module docstring)."""
     return await Soak(root, peers, seconds, seed, progress).run()
-
-
-def _spread(name: str, seconds: list[float]) -> dict[str, float | None]:
-    """The median and the longest of `seconds`, as `NAME_median` and `NAME_max`."""
-    if not seconds:
-        return {f"{name}_median": None, f"{name}_max": None}
-    return {
-        f"{name}_median": round(statistics.median(seconds), 2),
-        f"{name}_max": round(max(seconds), 2),
-    }

@@ -18,7 +18,7 @@ import asyncio
 import inspect
 import itertools
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
@@ -305,3 +305,25 @@ class Rpc:
             log.error("handler for %s returned %r, not a message body", env.body_name, result)
             why = f"internal error handling {env.body_name}: bad reply type"
             self.transport.reply(msg.route, env.request_id, ErrorReply(MapError.code, why))
+
+
+async def first_answer(
+    calls: Sequence[Awaitable[T]], accept: Callable[[T], bool] = lambda _answer: True
+) -> T | None:
+    """The first answer of `calls` (requests run at once) that `accept` takes; the
+    others are cancelled. A call that fails with a MapError counts as no answer;
+    None if no call gave one."""
+    pending = [asyncio.ensure_future(call) for call in calls]
+    try:
+        for next_done in asyncio.as_completed(pending):
+            try:
+                answer = await next_done
+            except MapError:
+                continue
+            if accept(answer):
+                return answer
+        return None
+    finally:
+        for fut in pending:
+            fut.cancel()
+        await asyncio.gather(*pending, return_exceptions=True)
