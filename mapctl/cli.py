@@ -20,9 +20,17 @@ EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
     "path",
     type=click.Path(file_okay=False, path_type=Path),
     default=Path("."),
-    help="Run as if started in PATH (like git -C).",
+    metavar="DIRECTORY",
+    help="Run as if started in DIRECTORY (like git -C).",
 )
-@click.option("--view", "view_name", default="main", show_default=True, help="The named view.")
+@click.option(
+    "--view",
+    "view_name",
+    default="main",
+    show_default=True,
+    metavar="NAME",
+    help="Work in the view called NAME.",
+)
 @click.option("-v", "--verbose", is_flag=True, help="Show tracebacks on errors.")
 @click.version_option(package_name="mapapi")
 @click.pass_context

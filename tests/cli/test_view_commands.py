@@ -297,3 +297,15 @@ class TestViews:
         assert points.json("ls", "pts", view="b") == {"items": []}
         points.commit(view="a")
         assert len(points.json("ls", "pts", view="b")["items"]) == 1
+
+
+class TestGlobalOptions:
+    def test_c_help_names_its_metavar(self, mapctl: Mapctl) -> None:
+        (line,) = [x for x in mapctl("--help").splitlines() if x.strip().startswith("-C ")]
+        assert "-C DIRECTORY" in line
+        assert "Run as if started in DIRECTORY" in line
+
+    def test_view_help_names_its_metavar(self, mapctl: Mapctl) -> None:
+        (line,) = [x for x in mapctl("--help").splitlines() if x.strip().startswith("--view ")]
+        assert "--view NAME" in line
+        assert "view called NAME" in line
