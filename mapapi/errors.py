@@ -108,10 +108,18 @@ class ConflictError(TransactionError):
         self.conflicts = conflicts
         self.resolved_at = resolved_at
         self._transaction = transaction
-        super().__init__(
-            f"{len(conflicts)} conflicting item(s); run `mapctl diff` and "
-            "`mapctl resolve`, then commit again"
+        super().__init__(self._hint("mapctl"))
+
+    def _hint(self, mapctl: str) -> str:
+        return (
+            f"{len(self.conflicts)} conflicting item(s); run `{mapctl} diff` and "
+            f"`{mapctl} resolve`, then commit again"
         )
+
+    def name_view(self, mapctl: str) -> None:
+        """Point the hint at one view's commands, `mapctl` being the command
+        line that reaches it (say `mapctl --view bob`)."""
+        self.args = (self._hint(mapctl),)
 
     def merge(self) -> Transaction:
         """A new transaction, begun when the conflicts were seen, holding every

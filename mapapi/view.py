@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass, field
 
 from mapapi.ids import ChunkId, ItemId
 from mapapi.transaction import Change, Conflict, Isolation
 
 Scope = tuple[str, ChunkId | None]
+
+DEFAULT_VIEW = "main"
+
+
+def mapctl_in(view: str) -> str:
+    """The `mapctl` command line that works in `view`, for hints: a hint that
+    left out `--view` would send the user to fix the default view instead."""
+    return "mapctl" if view == DEFAULT_VIEW else f"mapctl --view {shlex.quote(view)}"
 
 
 @dataclass

@@ -21,9 +21,8 @@ from mapapi.history import CommitRecord
 from mapapi.ids import ChunkId, ItemId
 from mapapi.peer import Peer
 from mapapi.transaction import Change, Conflict, Isolation, Op, Transaction
-from mapapi.view import View
+from mapapi.view import View, mapctl_in
 
-DEFAULT_VIEW = "main"
 Side = Literal["ours", "theirs"]
 
 
@@ -52,7 +51,9 @@ class Workspace:
             view = self.get(name)
             if view is None:
                 if not create:
-                    raise ViewClosedError(f"no open view {name!r}; run `mapctl view open`")
+                    raise ViewClosedError(
+                        f"no open view {name!r}; run `{mapctl_in(name)} view open`"
+                    )
                 view = View(name, self.peer.now())
             yield view
             self._save(view)
@@ -73,7 +74,8 @@ class Workspace:
             if old is not None and (old.changes or old.conflicts):
                 raise ViewClosedError(
                     f"view {name!r} has {len(old.changes)} staged change(s) and "
-                    f"{len(old.conflicts)} conflict(s); commit or `mapctl view abort` first"
+                    f"{len(old.conflicts)} conflict(s); commit or "
+                    f"`{mapctl_in(name)} view abort` first"
                 )
             view = View(name, tx.begin_time, isolation)
             self._save(view)
@@ -180,7 +182,7 @@ class Workspace:
         if view.conflicts:
             raise UnresolvedConflicts(
                 f"view {name!r} has {len(view.conflicts)} unresolved conflict(s); "
-                "run `mapctl diff`, then `mapctl resolve`"
+                f"run `{mapctl_in(name)} diff`, then `{mapctl_in(name)} resolve`"
             )
         if not (view.changes or view.isolation == "serializable"):
             self.peer.store.delete_view(name)
@@ -193,6 +195,7 @@ class Workspace:
             view.read_set, view.scopes = set(), set()  # reads were of the old snapshot
             view.conflicts = err.conflicts
             self._save(view)
+            err.name_view(mapctl_in(name))
             raise
         self.peer.store.delete_view(name)
         return record

@@ -66,6 +66,7 @@ def view_list(session: Session, as_json: bool) -> None:
 @pass_session
 def status(session: Session, as_json: bool) -> None:
     """Show the view, its begin time, staged changes and conflicts."""
+    from mapapi.view import mapctl_in
     from mapctl import render
 
     info = session.call("status", view=session.view)
@@ -79,7 +80,8 @@ def status(session: Session, as_json: bool) -> None:
     render.records("staged changes", info["staged"], ["op", "table", "id"])
     if info["conflicts"]:
         count = len(info["conflicts"])
-        render.line(f"{count} unresolved conflict(s): run `mapctl diff`", "yellow")
+        hint = f"run `{mapctl_in(session.view)} diff`"
+        render.line(f"{count} unresolved conflict(s): {hint}", "yellow")
 
 
 def _read_data(text: str) -> str:

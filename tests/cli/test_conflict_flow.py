@@ -65,9 +65,36 @@ class TestFailedCommit:
             ]
         }
         assert outcome.err_lines == [
+            "error: 1 conflicting item(s); run `mapctl --view bob diff` and "
+            "`mapctl --view bob resolve`, then commit again"
+        ]
+
+    def test_the_default_view_keeps_the_short_hint(self, points: Mapctl) -> None:
+        item = points.insert(BASE)
+        points.commit("seed")
+        points("view", "open", view="alice")
+        points("set", "pts", item, json.dumps(ALICE), view="alice")
+        points("set", "pts", item, json.dumps(BOB))
+        points.commit("alice", view="alice")
+        outcome = points.main("commit")
+        assert outcome.code == 3
+        assert outcome.err_lines == [
             "error: 1 conflicting item(s); run `mapctl diff` and `mapctl resolve`, "
             "then commit again"
         ]
+        refused = points.main("commit")
+        assert "run `mapctl diff`, then `mapctl resolve`" in refused.err
+        assert "run `mapctl diff`" in points("status")
+
+    def test_a_view_name_is_quoted_for_the_shell(self, points: Mapctl) -> None:
+        item = points.insert(BASE)
+        points.commit("seed")
+        points("view", "open", view="bob's")
+        points("set", "pts", item, json.dumps(ALICE))
+        points("set", "pts", item, json.dumps(BOB), view="bob's")
+        points.commit("main")
+        outcome = points.main("commit", view="bob's")
+        assert "run `mapctl --view 'bob'\"'\"'s' diff`" in outcome.err
 
     def test_diff_json_shows_base_ours_theirs(self, points: Mapctl) -> None:
         (item,) = _conflict(points, BASE)
@@ -80,7 +107,8 @@ class TestFailedCommit:
         status = points.json("status", view="bob")
         assert status["conflicts"] == [item]
         assert points.json("view", "list")["views"][0]["conflicts"] == 1
-        assert "1 unresolved conflict(s): run `mapctl diff`" in points("status", view="bob")
+        shown = points("status", view="bob")
+        assert "1 unresolved conflict(s): run `mapctl --view bob diff`" in shown
 
     def test_diff_plain_renders_the_conflict(self, points: Mapctl) -> None:
         (item,) = _conflict(points, BASE)
@@ -93,7 +121,7 @@ class TestFailedCommit:
         _conflict(points, BASE)
         outcome = points.main("commit", view="bob")
         assert outcome.code == 3
-        assert "mapctl resolve" in outcome.err
+        assert "run `mapctl --view bob diff`, then `mapctl --view bob resolve`" in outcome.err
         assert isinstance(points.invoke("commit", view="bob").exception, UnresolvedConflicts)
 
     def test_the_view_begins_again_after_the_conflict(self, points: Mapctl) -> None:

@@ -176,8 +176,8 @@ class TestThroughTheDaemon:
         conflicted = await daemon("commit", "-m", "bob", view="bob")
         assert conflicted.code == 3
         assert conflicted.err_lines == [
-            "error: 1 conflicting item(s); run `mapctl diff` and `mapctl resolve`, "
-            "then commit again"
+            "error: 1 conflicting item(s); run `mapctl --view bob diff` and "
+            "`mapctl --view bob resolve`, then commit again"
         ]
         assert (await daemon("resolve", "--ours", view="bob")).code == 0
         assert (await daemon("commit", "-m", "bob wins", view="bob")).code == 0

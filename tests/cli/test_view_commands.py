@@ -273,6 +273,11 @@ class TestViews:
         assert isinstance(result.exception, ViewClosedError)
         assert "mapctl view abort" in str(result.exception)
 
+    def test_open_in_a_named_view_names_it_in_the_hint(self, points: Mapctl) -> None:
+        points.insert({"x": 1}, view="w")
+        result = points.invoke("view", "open", view="w")
+        assert "`mapctl --view w view abort`" in str(result.exception)
+
     def test_reopen_an_empty_view_moves_its_begin_time(self, points: Mapctl) -> None:
         points("view", "open", view="w")
         points.insert({"x": 1})
