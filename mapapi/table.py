@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from google.protobuf import json_format, message_factory, struct_pb2, wrappers_pb2
-from google.protobuf.descriptor import FieldDescriptor
+from google.protobuf.descriptor import Descriptor, FieldDescriptor
 from google.protobuf.descriptor_pool import Default as _default_pool
 from google.protobuf.message import DecodeError, Message
 
@@ -110,36 +110,22 @@ class TableDescriptor:
         return message
 
     def to_dict(self, message: Message) -> Any:
-        """The payload as a JSON-compatible value (protobuf JSON mapping).
-
-        Struct maps come out with sorted keys, so output is stable across runs.
-        """
-        value = json_format.MessageToDict(message, preserving_proto_field_name=True)
-        if isinstance(message, struct_pb2.Struct):
-            value = json.loads(json.dumps(value, sort_keys=True))
-        return value
+        """The payload as plain JSON for scripts (`plain_json`)."""
+        return plain_json(message)
 
     def data_to_dict(self, data: bytes) -> Any:
         """`to_dict` of a stored payload."""
         return self.to_dict(self.decode(data))
 
     def field_value(self, message: Message, name: str) -> Any:
-        """The value of field `name` in its JSON form (None when absent).
+        """The value of top-level field `name` in its plain JSON form (None when absent).
 
         Unset proto3 scalars read as their defaults (0, "", false) and 64-bit
-        integers as numbers (the JSON mapping quotes them), so a search for
-        `value == 0` or `value == 5` finds what the user means.
+        integers as numbers, so a search for `value == 0` or `value == 5` finds
+        what the user means.
         """
-        value = json_format.MessageToDict(
-            message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
-        )
-        if not isinstance(value, dict):
-            return None
-        found = value.get(name)
-        desc = message.DESCRIPTOR.fields_by_name.get(name)
-        if found is not None and desc is not None and desc.cpp_type in _INT64_TYPES:
-            found = [int(v) for v in found] if isinstance(found, list) else int(found)
-        return found
+        value = plain_json(message)
+        return value.get(name) if isinstance(value, dict) else None
 
     def field_json(self, message: Message, name: str) -> str:
         """`field_value` as canonical JSON text (see `canonical_json`)."""
@@ -150,6 +136,64 @@ class TableDescriptor:
         """JSON text that equal JSON values share: keys sorted, integral numbers
         written as integers (JSON has one number type; Struct stores doubles)."""
         return json.dumps(_integral_as_int(value), sort_keys=True)
+
+
+def plain_json(message: Message) -> Any:
+    """A message as plain JSON for scripts, not protobuf's canonical JSON mapping.
+
+    The canonical mapping writes 64-bit integers as strings and leaves out fields
+    at their default; a script reading `--json` wants numbers and every field.
+    So: fields keep their proto names and declaration order, defaults are
+    present (an unset message field is null), 64-bit integers
+    (and Int64Value/UInt64Value) are numbers, and a Struct's integral numbers are
+    integers (it stores doubles, so `{"n": 1}` would come back as 1.0). Struct
+    maps come out with sorted keys, so output is stable across runs. Other
+    well-known types (Timestamp, Duration, ...) keep their canonical JSON form.
+    """
+    value = json_format.MessageToDict(
+        message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
+    )
+    return _plain(message.DESCRIPTOR, value)
+
+
+_INT_WRAPPERS = ("google.protobuf.Int64Value", "google.protobuf.UInt64Value")
+_JSON_VALUES = ("google.protobuf.Struct", "google.protobuf.Value", "google.protobuf.ListValue")
+
+
+def _plain(descriptor: Descriptor, value: Any) -> Any:
+    """`value` (canonical JSON of a `descriptor` message) with numbers made plain."""
+    name = descriptor.full_name
+    if name in _INT_WRAPPERS:
+        return int(value)
+    if name in _JSON_VALUES:
+        return json.loads(json.dumps(_integral_as_int(value), sort_keys=True))
+    if not isinstance(value, dict) or name == "google.protobuf.Any":
+        return value  # a well-known type written as a string, or an Any: as is
+    # Every field, in declaration order; an unset message field (or unset
+    # `optional` scalar) is null, which `from_json` reads back as unset.
+    return {
+        f.name: None if value.get(f.name) is None else _plain_field(f, value[f.name])
+        for f in descriptor.fields
+    }
+
+
+def _plain_field(field: FieldDescriptor, value: Any) -> Any:
+    entry = field.message_type
+    if entry is not None and entry.GetOptions().map_entry:
+        # Map keys stay strings (JSON object keys are), values are made plain.
+        element = entry.fields_by_name["value"]
+        return {k: _plain_scalar(element, v) for k, v in value.items()}
+    if field.is_repeated:
+        return [_plain_scalar(field, v) for v in value]
+    return _plain_scalar(field, value)
+
+
+def _plain_scalar(field: FieldDescriptor, value: Any) -> Any:
+    if field.message_type is not None:
+        return _plain(field.message_type, value)
+    if field.cpp_type in _INT64_TYPES:
+        return int(value)
+    return value
 
 
 def _integral_as_int(value: Any) -> Any:

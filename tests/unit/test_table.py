@@ -1,5 +1,6 @@
 """Tables: a name bound to a protobuf type, JSON in and out (mapapi.table)."""
 
+import json
 from typing import Any
 
 import pytest
@@ -91,8 +92,79 @@ class TestJson:
 
     def test_to_dict_uses_proto_field_names(self) -> None:
         message = COUNTERS.message_type(name="a", value=5)
-        assert COUNTERS.to_dict(message) == {"name": "a", "value": "5"}
-        assert COUNTERS.data_to_dict(COUNTERS.encode(message)) == {"name": "a", "value": "5"}
+        assert COUNTERS.to_dict(message) == {"name": "a", "value": 5}
+        assert COUNTERS.data_to_dict(COUNTERS.encode(message)) == {"name": "a", "value": 5}
+
+
+VERTICES = TableDescriptor.named("vertices", "mapapi.v1.Vertex")
+EDGES = TableDescriptor.named("edges", "mapapi.v1.Edge")
+MISSIONS = TableDescriptor.named("missions", "mapapi.v1.Mission")
+
+
+class TestPlainJson:
+    """`to_dict` is plain JSON for scripts (issue 15), not protobuf's canonical
+    mapping: 64-bit integers are numbers and fields at their default are present."""
+
+    def test_a_64_bit_integer_is_a_number(self) -> None:
+        value = COUNTERS.to_dict(COUNTERS.from_json('{"name": "a", "value": "2"}'))
+        assert value == {"name": "a", "value": 2}
+        assert type(value["value"]) is int
+
+    def test_fields_at_their_default_are_present(self) -> None:
+        assert COUNTERS.to_dict(COUNTERS.from_json("{}")) == {"name": "", "value": 0}
+
+    def test_index_0_is_present_and_an_int(self) -> None:
+        value = VERTICES.to_dict(VERTICES.from_json('{"mission": "m", "index": 0}'))
+        assert value == {"mission": "m", "index": 0, "pose": None, "timestamp": 0.0}
+        assert type(value["index"]) is int
+
+    def test_nested_repeated_and_enum_fields(self) -> None:
+        edge = EDGES.from_json('{"from_vertex": {"index": "7"}, "information": [1, 2], "kind": 2}')
+        assert EDGES.to_dict(edge) == {
+            "mission": "",
+            "from_vertex": {"mission": "", "index": 7},
+            "to_vertex": None,
+            "relative": None,
+            "information": [1.0, 2.0],
+            "kind": "LOOP",
+        }
+
+    def test_map_fields_keep_their_keys(self) -> None:
+        mission = MISSIONS.from_json('{"name": "m", "chunks": {"vertices": "ab"}}')
+        assert MISSIONS.to_dict(mission)["chunks"] == {"vertices": "ab"}
+
+    @pytest.mark.parametrize(
+        ("type_name", "text", "wanted"),
+        [
+            ("google.protobuf.Int64Value", '"-5"', -5),
+            ("google.protobuf.Int64Value", "0", 0),
+            ("google.protobuf.DoubleValue", "0", 0.0),
+            ("google.protobuf.StringValue", '""', ""),
+        ],
+    )
+    def test_wrappers_are_bare_values(self, type_name: str, text: str, wanted: Any) -> None:
+        table = TableDescriptor.named("w", type_name)
+        value = table.to_dict(table.from_json(text))
+        assert (value, type(value)) == (wanted, type(wanted))
+
+    def test_struct_integers_stay_integers(self) -> None:
+        value = NOTES.to_dict(NOTES.from_json('{"n": 1, "x": 1.5, "l": [0, {"z": 2}]}'))
+        assert json.dumps(value) == '{"l": [0, {"z": 2}], "n": 1, "x": 1.5}'
+
+    @pytest.mark.parametrize(
+        ("table", "text"),
+        [
+            (COUNTERS, '{"name": "a", "value": 9007199254740993}'),
+            (VERTICES, '{"mission": "m", "index": 3, "pose": {"x": 1.5, "qw": 1}}'),
+            (EDGES, '{"from_vertex": {"index": 1}, "to_vertex": {"index": 2}, "kind": 1}'),
+            (NOTES, '{"a": [1, "b", null, true]}'),
+        ],
+    )
+    def test_plain_json_reads_back_as_the_same_message(
+        self, table: TableDescriptor, text: str
+    ) -> None:
+        message = table.from_json(text)
+        assert table.from_json(json.dumps(table.to_dict(message))) == message
 
 
 class TestFieldJson:
