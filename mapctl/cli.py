@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from mapctl import completion
 from mapctl.commands import bench, demo, history, lookup, maps, peer, repo, security, view, watch
 from mapctl.session import Session
 
@@ -43,6 +44,7 @@ def cli(ctx: click.Context, path: Path, view_name: str, verbose: bool) -> None:
 
 for module in (repo, view, history, peer, security, lookup, watch, maps, bench, demo):
     module.register(cli)
+completion.register(cli)  # last: it attaches TAB completion to the commands above
 
 
 def main() -> None:
