@@ -1,9 +1,16 @@
 """The local control endpoint `mapctl` talks to while a peer daemon runs (DESIGN §9).
 
-The daemon serves `ControlCall{op, args_json}` on an `Rpc` of its own, bound to
-an ipc socket inside the repository (`.mapapi/control.sock`; tcp on 127.0.0.1
-when that path is too long for an ipc endpoint), by running
-`Operations.call(op, args)` on its peer and answering `ControlResult{json}`.
+The daemon serves `ControlCall{op, args_json, token}` on an `Rpc` of its own,
+bound to an ipc socket that only its owner can reach (mode 0600):
+`.mapapi/control.sock` inside the repository, or, when that path
+is too long for an ipc endpoint, a socket named after the repository in a
+private runtime folder (`$XDG_RUNTIME_DIR/mapapi`, else `/tmp/mapapi-<uid>`,
+mode 0700, refused if anyone else owns it). There is no tcp fallback: a tcp
+port on 127.0.0.1 is open to every local user. As a second wall, every call
+carries the owner's token from `.mapapi/control.token` (mode 0600, new at each
+start); a call without it is refused and logged before anything runs, so the
+daemon never reads or writes a path sent by a caller it has not authenticated.
+It runs `Operations.call(op, args)` on its peer and answers `ControlResult{json}`.
 A `MapError` travels as an `ErrorReply` and is raised again on the client as
 the same class, so a command exits with the same status whether a daemon runs
 or not (a conflicting `commit` still exits 3). `RemoteOperations` is the
@@ -19,10 +26,16 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hashlib
+import hmac
 import json
 import logging
 import os
+import secrets
+import stat
+import tempfile
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mapapi.clock import LamportClock
@@ -30,8 +43,10 @@ from mapapi.errors import (
     DaemonDied,
     MapError,
     NetworkError,
+    NotOwner,
     PeerNotRunning,
     PeerUnavailable,
+    RepoError,
     UsageError,
 )
 from mapapi.ids import PeerId
@@ -45,7 +60,7 @@ if TYPE_CHECKING:
 
     from mapapi.ops import Operations
     from mapapi.peer import Peer
-    from mapapi.repo import Repository
+    from mapapi.repo import PeerRecord, Repository
     from mapapi.security import Security
 
 log = logging.getLogger(__name__)
@@ -66,11 +81,84 @@ MAX_MESSAGE_SIZE = 512 * 1024 * 1024
 """Replies as large as a big `ls --json` must fit through the local endpoint."""
 
 
-def endpoints(repo: Repository) -> list[str]:
-    """Where the daemon of `repo` tries to serve its control endpoint, in order."""
-    path = str(repo.control_path)
-    tried = [f"ipc://{path}"] if len(os.fsencode(path)) <= IPC_PATH_MAX else []
-    return [*tried, "tcp://127.0.0.1:0"]
+TOKEN_FILE = "control.token"
+"""The owner's secret in `.mapapi/`, mode 0600, written anew by every daemon start."""
+
+
+def endpoint(repo: Repository) -> str:
+    """The ipc endpoint where the daemon of `repo` serves `mapctl`.
+
+    Raises:
+        RepoError: the path is too long even in the runtime folder, or that
+            folder is not private to this user.
+    """
+    inside = str(repo.control_path)
+    if len(os.fsencode(inside)) <= IPC_PATH_MAX:
+        return f"ipc://{inside}"
+    # One socket per repository: the name hashes its resolved root.
+    name = hashlib.sha256(os.fsencode(str(repo.root.resolve()))).hexdigest()[:32]
+    path = str(private_runtime_dir() / f"{name}.sock")
+    if len(os.fsencode(path)) > IPC_PATH_MAX:
+        raise RepoError(
+            f"no short private folder for the control socket ({path} is too long); "
+            "set XDG_RUNTIME_DIR to a short folder only you can enter"
+        )
+    return f"ipc://{path}"
+
+
+def private_runtime_dir() -> Path:
+    """A folder only this user can enter, for control sockets of deep repositories:
+    `$XDG_RUNTIME_DIR/mapapi` if the variable is set, else `/tmp/mapapi-<uid>`.
+
+    Raises:
+        RepoError: the folder exists but is a link, or another user owns it, or
+            others may enter it (someone could listen in our place).
+    """
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    base = Path(runtime) if runtime else Path(tempfile.gettempdir())
+    folder = base / ("mapapi" if runtime else f"mapapi-{os.geteuid()}")
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir(mode=0o700)
+    info = folder.lstat()
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.geteuid() or info.st_mode & 0o077:
+        raise RepoError(
+            f"the control folder {folder} is not private to this user (owner uid "
+            f"{info.st_uid}, mode {stat.filemode(info.st_mode)}); remove it and start again"
+        )
+    return folder
+
+
+def issue_token(repo: Repository) -> str:
+    """Write a fresh owner's token to `.mapapi/control.token` (mode 0600); returns it."""
+    token = secrets.token_hex(32)
+    path = repo.meta_dir / TOKEN_FILE
+    tmp = path.with_name(f"{TOKEN_FILE}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="ascii") as out:
+        out.write(token)
+    tmp.replace(path)
+    return token
+
+
+def read_token(repo: Repository) -> str:
+    """The owner's token of the daemon of `repo`.
+
+    Raises:
+        NotOwner: this user cannot read it (the daemon belongs to someone else).
+        PeerNotRunning: there is none (no daemon started here).
+    """
+    path = repo.meta_dir / TOKEN_FILE
+    try:
+        return path.read_text(encoding="ascii").strip()
+    except PermissionError as exc:
+        raise NotOwner(
+            f"the peer of {repo.root} belongs to another user: only its owner can "
+            "drive it (run mapctl as that user)"
+        ) from exc
+    except FileNotFoundError as exc:
+        raise PeerNotRunning(
+            f"no peer runs on {repo.root} ({path} is missing); start it with `mapctl peer start`"
+        ) from exc
 
 
 class ControlServer:
@@ -85,6 +173,7 @@ class ControlServer:
         self.stopping = False
         self.rpc = self._new_rpc()
         self._bound: str | None = None
+        self._token: str | None = None
 
     def _new_rpc(self) -> Rpc:
         transport = ZmqTransport(
@@ -101,28 +190,31 @@ class ControlServer:
         return self.rpc.address
 
     async def start(self, repo: Repository) -> str:
-        """Bind the first endpoint of `endpoints(repo)` that works; returns it.
+        """Issue a new owner's token and bind `endpoint(repo)`; returns the endpoint.
 
         Raises:
-            NetworkError: no endpoint could be bound.
+            NetworkError: the endpoint could not be bound.
+            RepoError: there is no private place for it.
         """
-        candidates = endpoints(repo)
-        for index, endpoint in enumerate(candidates):
-            if index:
-                self.rpc = self._new_rpc()  # a transport binds once
-            try:
-                self._bound = await self.rpc.start(endpoint)
-                return self._bound
-            except NetworkError as exc:
-                await self.rpc.close()
-                if index == len(candidates) - 1:
-                    raise
-                log.warning("control endpoint %s failed (%s); trying the next", endpoint, exc)
-        raise AssertionError("endpoints() always offers tcp")  # pragma: no cover
+        self._token = issue_token(repo)
+        self._bound = await self.rpc.start(endpoint(repo))
+        # Connecting to a unix socket needs write permission on it: owner only,
+        # whatever the umask (the token guards the instant before this chmod).
+        os.chmod(self._bound.removeprefix("ipc://"), 0o600)
+        return self._bound
 
     async def rpc_control_call(self, req: Request) -> ControlResult:
-        """Run one operation and answer its JSON result."""
+        """Run one operation for the owner and answer its JSON result.
+
+        Raises:
+            NotOwner: the call does not carry the owner's token.
+        """
         body: ControlCall = req.body
+        if self._token is None or not hmac.compare_digest(
+            body.token.encode(), self._token.encode()
+        ):
+            log.warning("refused control call %r without the owner's token", body.op[:40])
+            raise NotOwner("the control call does not carry the owner's token; refused")
         if self.stopping:
             raise PeerNotRunning("the peer is stopping; run the command again once it stopped")
         args = _decode_args(body.args_json)
@@ -142,6 +234,7 @@ class RemoteOperations:
 
     Args:
         endpoint: the daemon's control endpoint (its pid file says which).
+        token: the owner's token (`read_token`), sent with every call.
         who: how errors name the daemon, e.g. "the peer of /maps/a (pid 42)".
         timeout: seconds one operation may take.
         alive: tells whether the daemon process still runs; checked every
@@ -152,16 +245,31 @@ class RemoteOperations:
     def __init__(
         self,
         endpoint: str,
+        token: str,
         who: str = "the peer",
         timeout: float = CALL_TIMEOUT,
         alive: Callable[[], bool] | None = None,
     ) -> None:
         self.endpoint = endpoint
+        self.token = token
         self.who = who
         self.timeout = timeout
         self.alive = alive
         self._context: zmq.asyncio.Context | None = None
         self._rpc: Rpc | None = None
+
+    @classmethod
+    def of(
+        cls, repo: Repository, record: PeerRecord, who: str | None = None, **options: Any
+    ) -> RemoteOperations:
+        """The client of the daemon that `record` (the pid file of `repo`) describes,
+        with the owner's token; `options` as for the constructor.
+
+        Raises:
+            NotOwner: this user cannot read the token (another user's daemon).
+        """
+        who = who or f"the peer of {repo.root} (pid {record.pid})"
+        return cls(record.control, read_token(repo), who, **options)
 
     async def _connect(self) -> Rpc:
         if self._rpc is None:
@@ -201,7 +309,7 @@ class RemoteOperations:
             RequestTimeout: no answer within `timeout` seconds.
         """
         rpc = await self._connect()
-        call = ControlCall(op, json.dumps(args))
+        call = ControlCall(op, json.dumps(args), self.token)
         reply = asyncio.ensure_future(
             rpc.request(self.endpoint, call, timeout=self.timeout, expect=ControlResult)
         )

@@ -365,7 +365,7 @@ def _ping(record: PeerRecord, repo: Repository) -> None:
     from mapapi.control import RemoteOperations
 
     async def ping() -> None:
-        remote = RemoteOperations(record.control, f"the peer of {repo.root} (pid {record.pid})")
+        remote = RemoteOperations.of(repo, record)
         try:
             await remote.ping()
         finally:
@@ -420,9 +420,7 @@ def _call(record: PeerRecord, repo: Repository, op: str) -> object:
     from mapapi.control import RemoteOperations
 
     async def call() -> object:
-        remote = RemoteOperations(
-            record.control, f"the peer of {repo.root} (pid {record.pid})", timeout=5.0
-        )
+        remote = RemoteOperations.of(repo, record, timeout=5.0)
         try:
             return await remote.call(op, {})
         finally:

@@ -60,6 +60,13 @@ class CorruptRepoError(RepoError):
     code = 13
 
 
+class NotOwner(RepoError):
+    """A call reached a peer daemon's control endpoint without the owner's token
+    (`.mapapi/control.token`, readable only by the user who runs the daemon)."""
+
+    code = 14
+
+
 class ChunkError(MapError):
     """A problem with a chunk."""
 

@@ -54,8 +54,7 @@ class Session:
             if record is not None:
                 from mapapi.control import RemoteOperations
 
-                who = f"the peer of {repo.root} (pid {record.pid})"
-                self._ops = RemoteOperations(record.control, who, alive=repo.peer_locked)
+                self._ops = RemoteOperations.of(repo, record, alive=repo.peer_locked)
             else:
                 from mapapi.ops import Operations
                 from mapapi.peer import Peer

@@ -147,8 +147,7 @@ class Soak:
 
     # -- setup ------------------------------------------------------------------------
     def _attach(self, node: Node, peer: SwarmPeer) -> None:
-        who = f"the peer of {node.repo.root} (pid {peer.record.pid})"
-        node.ops = RemoteOperations(peer.record.control, who, alive=node.repo.peer_locked)
+        node.ops = RemoteOperations.of(node.repo, peer.record, alive=node.repo.peer_locked)
         node.up.set()
 
     async def _setup(self) -> None:
@@ -308,8 +307,7 @@ class Soak:
         began = time.monotonic()
         record = await asyncio.to_thread(spawn_detached, node.repo, argv)  # kills one that hangs
         self.tally.restart_s.append(time.monotonic() - began)
-        who = f"the peer of {node.repo.root} (pid {record.pid})"
-        node.ops = RemoteOperations(record.control, who, alive=node.repo.peer_locked)
+        node.ops = RemoteOperations.of(node.repo, record, alive=node.repo.peer_locked)
         node.up.set()
         self.tally.restarts += 1
         log.info("soak: started %s again", node.repo.root.name)

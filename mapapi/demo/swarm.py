@@ -74,8 +74,7 @@ class LocalSwarm:
             joins = (self.peers[0].record.join,) if self.peers else ()
             argv = daemon_command(repo, joins=joins)
             record = await asyncio.to_thread(spawn_detached, repo, argv)
-            who = f"the peer of {repo.root} (pid {record.pid})"
-            peer = SwarmPeer(repo.root.name, repo, record, RemoteOperations(record.control, who))
+            peer = SwarmPeer(repo.root.name, repo, record, RemoteOperations.of(repo, record))
             self.peers.append(peer)
             if started is not None:
                 started(peer)

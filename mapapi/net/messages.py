@@ -163,10 +163,12 @@ class Bye:
 
 @dataclass(frozen=True, slots=True)
 class ControlCall:
-    """The CLI asks the running peer to perform one `mapapi.ops` operation."""
+    """The CLI asks the running peer to perform one `mapapi.ops` operation,
+    proving with `token` that it runs as the daemon's owner."""
 
     op: str
     args_json: str
+    token: str = ""
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 
 from mapapi import Repository, known_peers
-from mapapi.control import endpoints
 from mapapi.daemon import advertised_address, stop_daemon
 from mapapi.repo import PeerRecord
 from mapapi.testing import wait_until
@@ -106,14 +105,6 @@ class TestStalePidFile:
         (points.repo / ".mapapi" / "peer.pid").write_text("{not json", encoding="utf-8")
         assert Repository.find(points.repo).read_peer_record() is None
         assert points.json("table", "list")["tables"][0]["name"] == "pts"
-
-
-class TestControlEndpoint:
-    def test_ipc_inside_the_repo_or_tcp_when_the_path_is_too_long(self, tmp_path: Path) -> None:
-        short = Repository.init(tmp_path / "r")
-        assert endpoints(short)[0] == f"ipc://{short.meta_dir / 'control.sock'}"
-        deep = Repository.init(tmp_path / ("d" * 120))
-        assert endpoints(deep) == ["tcp://127.0.0.1:0"]
 
 
 class TestAdvertisedAddress:

@@ -417,12 +417,14 @@ class Bye(_message.Message):
     def __init__(self) -> None: ...
 
 class ControlCall(_message.Message):
-    __slots__ = ("op", "args_json")
+    __slots__ = ("op", "args_json", "token")
     OP_FIELD_NUMBER: _ClassVar[int]
     ARGS_JSON_FIELD_NUMBER: _ClassVar[int]
+    TOKEN_FIELD_NUMBER: _ClassVar[int]
     op: str
     args_json: str
-    def __init__(self, op: _Optional[str] = ..., args_json: _Optional[str] = ...) -> None: ...
+    token: str
+    def __init__(self, op: _Optional[str] = ..., args_json: _Optional[str] = ..., token: _Optional[str] = ...) -> None: ...
 
 class ControlResult(_message.Message):
     __slots__ = ("json",)
