@@ -150,7 +150,7 @@ def _check_confirmed(
                 f"commit {record.id.short} is applied here, but only {len(applied)} of the "
                 f"{len(h.tokens)} holders of chunk {h.chunk.short} confirmed it; if this peer "
                 "is cut off from the others, they decide whether it stays when they evict "
-                "this peer: check `mapctl log` once the swarm answers again"
+                "this peer"
             )
 
 

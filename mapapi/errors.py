@@ -3,6 +3,18 @@
 Every error mapapi raises on purpose is a `MapError`. `retriable` tells retry
 loops whether the same call may succeed later; `code` travels in error replies
 and picks the CLI's exit status through `exit_code`.
+
+Network errors (exit 5) end their message with `advice`: what a person should
+do next, which always begins with one of three verbs (`ADVICE_VERBS`):
+
+- "retry now": transient, the same call is likely to succeed at once;
+- "wait": a peer is restarting, being evicted or links are settling; the advice
+  says roughly how long before retrying;
+- "act": retrying cannot help until someone runs what the advice names.
+
+A class gives the usual advice; a raise site that knows better passes its own
+(`advice=`). The advice is part of the message, so it survives the trip from a
+peer daemon to `mapctl` as an `ErrorReply`.
 """
 
 from __future__ import annotations
@@ -13,12 +25,35 @@ if TYPE_CHECKING:
     from mapapi.transaction import Conflict, Transaction
 
 
+ADVICE_VERBS = ("retry now", "wait", "act")
+
+# Seconds before a silent peer is declared dead and evicted by its co-holders
+# (mapapi.failure.DEAD_AFTER, 3 s), plus a round of the heartbeat: the "wait"
+# advice quotes it so people know how long "a moment" is.
+SETTLE_S = 5
+
+
 class MapError(Exception):
-    """Base for every error mapapi raises on purpose."""
+    """Base for every error mapapi raises on purpose.
+
+    Args:
+        message: what failed.
+        advice: what to do next, appended to the message after "; ". None
+            takes the class's `advice` (empty for most errors, whose
+            messages say it themselves).
+    """
 
     retriable: ClassVar[bool] = False
     code: ClassVar[int] = 1
     exit_code: ClassVar[int] = 1
+    advice: str = ""
+
+    def __init__(self, message: str = "", *, advice: str | None = None) -> None:
+        if advice is not None:
+            self.advice = advice
+        if self.advice and not message.endswith(self.advice):
+            message = f"{message}; {self.advice}" if message else self.advice
+        super().__init__(message)
 
 
 class UsageError(MapError, ValueError):
@@ -172,6 +207,7 @@ class NetworkError(MapError):
     retriable = True
     code = 40
     exit_code = 5
+    advice = "retry now; if it fails again, see who answers with `mapctl peers`"
 
 
 class PeerUnavailable(NetworkError):
@@ -179,6 +215,10 @@ class PeerUnavailable(NetworkError):
 
     retriable = True
     code = 41
+    advice = (
+        f"wait about {SETTLE_S} s and retry: the peer may be restarting, and a peer silent "
+        "for 3 s is evicted so the others go on; if it persists, check `mapctl peers`"
+    )
 
 
 class RequestTimeout(NetworkError):
@@ -186,6 +226,10 @@ class RequestTimeout(NetworkError):
 
     retriable = True
     code = 42
+    advice = (
+        "retry now (a reply can be lost on a busy link); if it times out again, wait "
+        f"about {SETTLE_S} s for the peer to restart or be evicted, then check `mapctl peers`"
+    )
 
 
 class ProtocolError(NetworkError):
@@ -193,6 +237,9 @@ class ProtocolError(NetworkError):
 
     retriable = False
     code = 43
+    advice = (
+        "act: run one mapapi version on every peer (`mapctl --version`); retrying will not help"
+    )
 
 
 class DaemonDied(PeerUnavailable):
@@ -201,6 +248,10 @@ class DaemonDied(PeerUnavailable):
 
     retriable = False
     code = 45
+    advice = (
+        "act: start the peer again (`mapctl peer start --detach`), check with `mapctl log` "
+        "whether the operation took effect, and run it again if not"
+    )
 
 
 class CommitUncertain(NetworkError):
@@ -210,6 +261,10 @@ class CommitUncertain(NetworkError):
 
     retriable = False
     code = 44
+    advice = (
+        f"wait about {SETTLE_S} s for the holders to settle, then check with `mapctl log` "
+        "that the commit is there; do not commit it again before"
+    )
 
 
 class AccessRefused(NetworkError):
@@ -219,6 +274,7 @@ class AccessRefused(NetworkError):
 
     retriable = False
     code = 49
+    advice = "act: change the trust lists (`mapctl trust add KEY`, `mapctl key show`)"
 
 
 class SwarmError(MapError):

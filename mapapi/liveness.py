@@ -81,7 +81,7 @@ class Liveness:
         if self.rpc.down:
             member = self.members.get(peer)
             if member is not None:
-                self.rpc.down.discard(member.address)
+                self.rpc.down.pop(member.address, None)
         change = self.detector.heard(peer, time.monotonic())
         if change is not None:
             self._report(change)
@@ -92,8 +92,9 @@ class Liveness:
         quorum that evicted it)."""
         member = self.members.get(peer)
         if member is not None and member.address:
-            self.rpc.down.add(member.address)
-            self.rpc.fail_pending(member.address, f"peer {peer.short} is down")
+            who = f"peer {self.members.label(peer)}"
+            self.rpc.down[member.address] = who
+            self.rpc.fail_pending(member.address, f"{who} is down")
         if self.on_down is not None:
             self.on_down(peer)
 

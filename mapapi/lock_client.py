@@ -17,6 +17,7 @@ from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
 from mapapi.errors import (
+    SETTLE_S,
     LockNotHeld,
     LockTimeout,
     MapError,
@@ -167,8 +168,8 @@ class LockService:
         current = self.table[chunk].grant
         if current is not None and current.writer != writer and self.is_down(current.writer):
             raise PeerUnavailable(
-                f"chunk {chunk.short} is locked by {current.writer.short}, which does not "
-                "answer; retry once the other holders evicted it"
+                f"chunk {chunk.short} is locked by {self.members.label(current.writer)}, "
+                "which does not answer"
             )
 
     def writer_down(self, peer: PeerId) -> None:
@@ -262,8 +263,11 @@ class LockService:
             return (await self.grant_local(chunk, self.me, self.lock_timeout)).token
         if self.is_down(holder):
             raise PeerUnavailable(
-                f"holder {holder.short} of chunk {chunk.short} does not answer; the other "
-                "holders evict it if they are a majority (then retry), or wait for it"
+                f"holder {self.members.label(holder)} of chunk {chunk.short} does not answer",
+                advice=(
+                    f"wait about {SETTLE_S} s and retry: the other holders evict it if they are a "
+                    "majority; if not, wait for it to come back (`mapctl peers`)"
+                ),
             )
         try:
             reply = await self.rpc.request(

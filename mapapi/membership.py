@@ -18,6 +18,12 @@ class MemberState:
     last_seen: float | None = None
 
 
+def label(peer: PeerId, member: Member | None) -> str:
+    """See `Members.label`; a name equal to the short id (the default) is not repeated."""
+    name = member.name if member is not None else ""
+    return f"{name} ({peer.short})" if name and name != peer.short else peer.short
+
+
 class Members:
     """The peers this peer knows, itself included."""
 
@@ -54,10 +60,15 @@ class Members:
         state = self._known.get(peer)
         if state is None:
             raise PeerUnavailable(
-                f"peer {peer.short} is not a known member of the swarm; "
-                "join it first (`mapctl join ADDR`)"
+                f"peer {peer.short} is not a known member of the swarm",
+                advice="act: join its swarm first (`mapctl join ADDR`)",
             )
         return state.member.address
+
+    def label(self, peer: PeerId) -> str:
+        """How messages name `peer`: "robot2 (146ca670)" (its name, from `init
+        --name`, then its short id), or the short id while the name is unknown."""
+        return label(peer, self.get(peer))
 
     def get(self, peer: PeerId) -> Member | None:
         """A member by id, or None."""

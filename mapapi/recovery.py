@@ -244,7 +244,10 @@ class Recovery:
         for answer in answers:
             assert isinstance(answer, CommitStatus)
             if answer.pending:
-                raise PeerUnavailable(f"a holder of {chunk.short} is still committing; later")
+                raise PeerUnavailable(
+                    f"a holder of {chunk.short} is still committing",
+                    advice="retry now: the commit completes or is dropped within a lease",
+                )
             applied.update(answer.applied)
         apply = sorted((batches[c] for c in ids if c in applied), key=lambda b: b.record.time)
         return tuple(apply), tuple(c for c in ids if c not in applied)

@@ -262,9 +262,13 @@ def error_from_reply(reply: ErrorReply) -> MapError:
     cls = error_class(reply.code)
     if cls is ProtocolError and reply.code != ProtocolError.code:
         return ProtocolError(f"peer replied unknown error code {reply.code}: {reply.message}")
-    try:
-        return cls(reply.message)
-    except TypeError:  # a class whose __init__ takes structured arguments
-        exc = cls.__new__(cls)
-        Exception.__init__(exc, reply.message)
-        return exc
+    if not cls.advice:
+        try:
+            return cls(reply.message)
+        except TypeError:  # a class whose __init__ takes structured arguments
+            pass
+    # The message is whole, its advice included (an advised class would append
+    # its own advice again, after the sender's).
+    exc = cls.__new__(cls)
+    Exception.__init__(exc, reply.message)
+    return exc

@@ -125,22 +125,31 @@ def check_link(address: str, endpoint: str, key: bytes | None, security: Securit
     if security is None:
         if key is not None:
             raise AccessRefused(
-                f"{endpoint} is a secure swarm and this peer is open: make this repository "
-                "secure (`mapctl init --secure`), trust its key (`mapctl trust add "
-                f"{key_text(key)}`) and have it trust yours (`mapctl key show`)"
+                f"{endpoint} is a secure swarm and this peer is open",
+                advice=(
+                    "act: make this repository secure (`mapctl init --secure`), trust its key "
+                    f"(`mapctl trust add {key_text(key)}`) and have it trust yours "
+                    "(`mapctl key show`)"
+                ),
             )
         return
     if key is None:
         raise AccessRefused(
             f"{address} names no key, and this peer is secure: it talks only to secure "
-            "peers, through the address they print (…#curve=KEY); join an open swarm from an "
-            "open repository"
+            "peers, through the address they print (…#curve=KEY)",
+            advice="act: join through that address, or join an open swarm from an open repository",
         )
     if not security.trusts(key):
         raise AccessRefused(
-            f"this peer does not trust the key of {endpoint} ({key_text(key)}): "
-            f"run `mapctl trust add {key_text(key)}` if it belongs to your swarm"
+            f"this peer does not trust the key of {endpoint} ({key_text(key)})",
+            advice=f"act: run `mapctl trust add {key_text(key)}` if it belongs to your swarm",
         )
+
+
+_MAKE_SECURE = (
+    "act: make this repository secure (`mapctl init --secure`), trust its key and join "
+    "through the address it prints (…#curve=KEY)"
+)
 
 
 @dataclass
@@ -178,25 +187,25 @@ class LinkWatch:
         mine = key_text(self.security.keys.public) if self.security else "?"
         return AccessRefused(
             f"{self.endpoint} refused this peer's key {mine} (status {status}): it is not "
-            f"on that peer's trust list; run `mapctl trust add {mine}` there"
+            "on that peer's trust list",
+            advice=f"act: run `mapctl trust add {mine}` there",
         )
 
     def _mismatch(self, code: int) -> AccessRefused:
         if code == _MECHANISM_MISMATCH and self.security is None:
             return AccessRefused(
-                f"{self.endpoint} is a secure swarm and this peer is open (the handshake "
-                "failed): make this repository secure (`mapctl init --secure`), trust its key "
-                "and join through the address it prints (…#curve=KEY)"
+                f"{self.endpoint} is a secure swarm and this peer is open (the handshake failed)",
+                advice=_MAKE_SECURE,
             )
         if code == _MECHANISM_MISMATCH:
             return AccessRefused(
-                f"{self.endpoint} is an open swarm and this peer is secure (the handshake "
-                "failed): join it from an open repository, or make every peer secure"
+                f"{self.endpoint} is an open swarm and this peer is secure (the handshake failed)",
+                advice="act: join it from an open repository, or make every peer secure",
             )
         if code == _CRYPTOGRAPHIC:
             return AccessRefused(
-                f"{self.endpoint} does not hold the key its address names (the handshake "
-                "failed): take the address it prints now"
+                f"{self.endpoint} does not hold the key its address names (the handshake failed)",
+                advice="act: join through the address it prints now",
             )
         return AccessRefused(f"the handshake with {self.endpoint} failed (protocol error {code})")
 
@@ -204,10 +213,11 @@ class LinkWatch:
         if self.security is None:
             return AccessRefused(
                 f"{self.endpoint} cut every handshake: it is no open mapapi peer, most likely "
-                "a secure swarm; make this repository secure (`mapctl init --secure`), trust "
-                "its key and join through the address it prints (…#curve=KEY)"
+                "a secure swarm",
+                advice=_MAKE_SECURE,
             )
         return AccessRefused(
-            f"{self.endpoint} cut every handshake: it is an open swarm (join it from an open "
-            "repository), or it does not hold the key its address names"
+            f"{self.endpoint} cut every handshake: it is an open swarm, or it does not hold "
+            "the key its address names",
+            advice="act: join it from an open repository, or through the address it prints now",
         )

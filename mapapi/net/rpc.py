@@ -33,6 +33,8 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 DEFAULT_TIMEOUT = 5.0
+# What to do when this peer's own side closes (`peer stop`, a shutdown) under a request.
+_CLOSING = "wait for this peer to stop, then start it again (`mapctl peer start --detach`)"
 """Seconds a request waits for its reply unless told otherwise (DESIGN §11)."""
 
 
@@ -71,9 +73,10 @@ class Rpc:
         self._ids = itertools.count(1)
         self._closed = False
         self.on_seen: Callable[[PeerId], None] | None = None  # called for every message
-        # Addresses of peers declared dead (`mapapi.liveness`): requests to them
-        # fail at once instead of waiting out their deadlines, probes excepted.
-        self.down: set[str] = set()
+        # Addresses of peers declared dead (`mapapi.liveness`), each with who
+        # answers there ("peer robot2 (146ca670)"): requests to them fail at once
+        # instead of waiting out their deadlines, probes excepted.
+        self.down: dict[str, str] = {}
         transport.set_sink(self)
 
     @property
@@ -156,9 +159,11 @@ class Rpc:
             ProtocolError: a malformed or unexpected reply.
         """
         if self._closed:
-            raise PeerUnavailable(f"cannot reach {address}: this peer is closing")
+            raise PeerUnavailable(f"cannot reach {address}: this peer is closing", advice=_CLOSING)
         if address in self.down and not probe:
-            raise PeerUnavailable(f"{address} is down: it has not answered for a while")
+            raise PeerUnavailable(
+                f"{self.down[address]} at {address} is down: it has not answered for a while"
+            )
         deadline = self.default_timeout if timeout is None else timeout
         request_id = next(self._ids)
         fut: asyncio.Future[object] = asyncio.get_running_loop().create_future()
@@ -170,8 +175,7 @@ class Rpc:
         except TimeoutError:
             name = codec.body_name(body)
             raise RequestTimeout(
-                f"no reply from {address} to {name} within {deadline:g} s; "
-                "check that the peer runs and is reachable"
+                f"no reply from {address} to {name} within {deadline:g} s"
             ) from None
         finally:
             self._pending.pop(request_id, None)
@@ -190,7 +194,7 @@ class Rpc:
             PeerUnavailable: this side is closed.
         """
         if self._closed:
-            raise PeerUnavailable(f"cannot reach {address}: this peer is closing")
+            raise PeerUnavailable(f"cannot reach {address}: this peer is closing", advice=_CLOSING)
         self.transport.send(address, Kind.NOTIFY, 0, body)
 
     async def forget(self, address: str) -> None:
@@ -216,7 +220,9 @@ class Rpc:
         self._closed = True
         for address, fut in self._pending.values():
             if not fut.done():
-                fut.set_exception(PeerUnavailable(f"closed while waiting for {address}"))
+                fut.set_exception(
+                    PeerUnavailable(f"closed while waiting for {address}", advice=_CLOSING)
+                )
         tasks = [t for t in self._tasks if t is not asyncio.current_task()]
         for task in tasks:
             task.cancel()

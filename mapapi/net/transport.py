@@ -201,7 +201,10 @@ class ZmqTransport:
             router.bind(bind)
         except zmq.ZMQError as exc:
             router.close(linger=0)
-            raise NetworkError(f"cannot listen on {bind}: {exc}") from exc
+            raise NetworkError(
+                f"cannot listen on {bind}: {exc}",
+                advice="act: pick a free port, or port 0 for any (`mapctl peer start --listen`)",
+            ) from exc
         self._router = router
         endpoint = router.getsockopt_string(zmq.LAST_ENDPOINT)
         if self.security is not None:
@@ -224,7 +227,8 @@ class ZmqTransport:
         data = self._stamp(kind, request_id, body)
         if len(data) > self.max_message_size:
             raise ProtocolError(
-                f"message of {len(data)} bytes exceeds the limit of {self.max_message_size}"
+                f"message of {len(data)} bytes exceeds the limit of {self.max_message_size}",
+                advice="act: send less at once (split the commit or the import)",
             )
         self._out(self._dealer(address), [data], address, codec.body_name(body), len(data))
 

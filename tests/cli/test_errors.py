@@ -12,8 +12,11 @@ from pathlib import Path
 
 import pytest
 
-from mapapi import NetworkError, Peer
-from tests.cli.conftest import Mapctl, run_main
+from mapapi import NetworkError, Peer, Repository
+from mapapi.errors import ADVICE_VERBS
+from mapapi.ids import ChunkId
+from mapapi.net.codec import error_from_reply, error_reply
+from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl, run_main
 
 
 def _console(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -146,3 +149,55 @@ class TestExitCodes:
         outcome = run_main(["--version"])
         assert outcome.code == 0
         assert "version" in outcome.out
+
+
+def _network_errors() -> list[type[NetworkError]]:
+    """NetworkError and every subclass, however deep."""
+    found: list[type[NetworkError]] = [NetworkError]
+    for cls in found:
+        found.extend(cls.__subclasses__())
+    return found
+
+
+class TestNetworkAdvice:
+    """Every network error says whether to retry now, wait or act (issue 15)."""
+
+    @pytest.mark.parametrize("cls", _network_errors(), ids=lambda c: c.__name__)
+    def test_every_network_error_ends_with_advice(self, cls: type[NetworkError]) -> None:
+        assert cls.advice.startswith(ADVICE_VERBS), cls.advice
+        assert str(cls("it failed")) == f"it failed; {cls.advice}"
+
+    @pytest.mark.parametrize("cls", _network_errors(), ids=lambda c: c.__name__)
+    def test_advice_survives_an_error_reply_once(self, cls: type[NetworkError]) -> None:
+        sent = cls("it failed", advice="act: run `mapctl fix`")
+        received = error_from_reply(error_reply(sent))
+        assert type(received) is cls
+        assert str(received) == "it failed; act: run `mapctl fix`"
+
+    async def test_a_crashed_holder_is_named_with_what_to_do(
+        self, daemon: InProcessDaemon, tmp_path: Path
+    ) -> None:
+        assert daemon.record is not None
+        await daemon.json("table", "create", "pts", "--type", STRUCT)
+        chunk = (await daemon.json("chunk", "create", "pts"))["id"]
+        other = Peer.of(Repository.init(tmp_path / "other", "robot2"))
+        await other.start()
+        try:
+            await other.join(daemon.record.join)
+            await other.participate(ChunkId(chunk))
+            await _crash(other)
+            assert (await daemon("set", "pts", '{"x": 1}')).code == 0
+            failed = await daemon("commit", "-m", "while robot2 is down")
+        finally:
+            await other.close()
+        assert failed.code == 5, failed
+        assert "robot2 (" in failed.err, failed.err
+        assert "wait about" in failed.err, failed.err
+
+
+async def _crash(peer: Peer) -> None:
+    """Close the peer's network side with no goodbye, as after `kill -9`."""
+    swarm = peer.swarm
+    assert swarm is not None
+    peer.swarm = None
+    await swarm.close()
