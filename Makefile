@@ -1,45 +1,66 @@
 # Two entry points for a fresh Debian/Ubuntu machine: `make demo` and `make test`.
-# Each creates .venv, installs what it needs (and the system libraries those
-# packages load), then runs.
+# Each creates .venv, installs what it needs into it, says what and why, then runs.
+# `make demo` installs only what `mapctl demo` imports; `make test` everything the
+# tests use (and the system library open3d loads). One stamp per set, so `make demo`
+# then `make test` adds the test set to the same .venv.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+DEMO_STAMP := $(VENV)/.installed-demo
+TEST_STAMP := $(VENV)/.installed-test
+# `make check`: the tests without peer processes or swarms, about 70 s on 2 cores
+# (tests/unit/test_makefile.py checks the list).
+CHECK_TESTS := tests/unit tests/property tests/cli
 
-.PHONY: test demo tour proto lint bench bench-swarm install clean
+.PHONY: test check demo tour proto lint bench bench-swarm install clean
 
 $(PY):
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
+	@echo "==> creating the virtual environment $(VENV) with $(PYTHON); everything below installs into it"
+	@$(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install --quiet --upgrade pip
 
-$(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e '.[dev,pointcloud,registration]'
-	bash scripts/ensure-syslibs.sh
-	touch $(STAMP)
+# What `mapctl demo` imports (mapctl/commands/demo.py, mapapi/demo/): the core
+# dependencies, and matplotlib for the two PNGs it draws.
+$(DEMO_STAMP): pyproject.toml | $(PY)
+	@echo "==> installing mapapi and what the demo needs into $(VENV): click, rich, pyzmq, protobuf, numpy, and matplotlib (the 'plot' extra) for its PNGs"
+	@$(PY) -m pip install --quiet -e '.[plot]'
+	@touch $@
 
-install: $(STAMP)
+# The test set holds the demo set, so it marks both as installed.
+$(TEST_STAMP): pyproject.toml | $(PY)
+	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy), matplotlib, open3d-cpu for point clouds and gtsam for registration"
+	@$(PY) -m pip install --quiet -e '.[dev,plot,pointcloud,registration]'
+	@bash scripts/ensure-syslibs.sh
+	@touch $@ $(DEMO_STAMP)
 
-test: $(STAMP)
-	$(PY) -m pytest -q
+install: $(TEST_STAMP)
 
-demo: $(STAMP)
+test: $(TEST_STAMP)
+	@echo "==> running the whole test suite: about 7 minutes on 2 cores (make check: the quick part, about 1 minute)"
+	$(PY) -m pytest --durations=10
+
+check: $(TEST_STAMP)
+	@echo "==> running the quick tests ($(CHECK_TESTS)): about 70 s on 2 cores; make test runs them all"
+	$(PY) -m pytest $(CHECK_TESTS) --durations=5
+
+demo: $(DEMO_STAMP)
 	$(VENV)/bin/mapctl demo
 
-tour: $(STAMP)
+tour: $(DEMO_STAMP)
 	bash scripts/tour.sh
 
-proto: $(STAMP)
+proto: $(TEST_STAMP)
 	bash scripts/gen-proto.sh mapapi/_pb
 
-lint: $(STAMP)
+lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff check mapapi mapctl tests
 	$(VENV)/bin/ruff format --check mapapi mapctl tests
 	$(VENV)/bin/mypy mapapi mapctl
 
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(VENV)/bin/mapctl bench local
 
-bench-swarm: $(STAMP)
+bench-swarm: $(TEST_STAMP)
 	bash scripts/bench-swarm.sh
 
 clean:
