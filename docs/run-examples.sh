@@ -7,7 +7,8 @@
 # A page's ```bash blocks run in order as one script (so `cd` and variables carry
 # over from block to block); every ```python block is saved as its own file and run
 # with the project's Python at the point where it appears. ```text and ```console
-# blocks are output and transcripts: shown, not run. A command that is meant to
+# blocks are output and transcripts: shown, not run; so are ```sh, ```zsh and ```fish
+# blocks, for lines the reader runs once by hand (completion.md: editing ~/.bashrc). A command that is meant to
 # fail is written `cmd || echo "exit $?"` in the page itself.
 #
 # A page must stop the peer daemons it starts (`mapctl -C DIR peer stop`). Any
