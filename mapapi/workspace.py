@@ -13,17 +13,14 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from typing import Literal
 
 from mapapi import codec
 from mapapi.errors import ConflictError, UnresolvedConflicts, UsageError, ViewClosedError
 from mapapi.history import CommitRecord
 from mapapi.ids import ChunkId, ItemId
 from mapapi.peer import Peer
-from mapapi.transaction import Change, Conflict, Isolation, Op, Transaction
-from mapapi.view import View, mapctl_in
-
-Side = Literal["ours", "theirs"]
+from mapapi.transaction import Isolation, Transaction
+from mapapi.view import Side, View, discards, mapctl_in, settle
 
 
 class Workspace:
@@ -206,15 +203,26 @@ class Workspace:
         side: Side,
         item_ids: Iterable[ItemId] = (),
         edited: dict[ItemId, bytes] | None = None,
+        *,
+        force: bool = False,
     ) -> list[ItemId]:
         """Settle conflicts: keep `side`, or the `edited` payload where given.
+
+        "ours" is what the view has staged now: an edit staged after the
+        conflict wins over the side that conflicted.
 
         Args:
             item_ids: which conflicts (all when empty); prefixes are not expanded here.
             edited: item -> payload that replaces both sides.
+            force: discard edits staged after the conflict where the resolution
+                replaces them; without it such a resolution is refused.
 
         Returns:
             The items resolved.
+
+        Raises:
+            UsageError: an id without conflict, or an edit staged after the
+                conflict would be discarded (nothing is resolved then).
         """
         edited = edited or {}
         with self._editing(name, create=False) as view:
@@ -222,30 +230,37 @@ class Workspace:
             unknown = wanted - {c.item_id for c in view.conflicts}
             if unknown:
                 raise UsageError(f"no conflict on item(s) {', '.join(sorted(unknown))}")
+            staged = view.staged_since_conflict()
+            settled = {
+                c.item_id: settle(c, staged.get(c.item_id), side, edited.get(c.item_id))
+                for c in view.conflicts
+                if c.item_id in wanted
+            }
+            lost = sorted(i for i, change in settled.items() if discards(staged.get(i), change))
+            if lost and not force:
+                raise UsageError(_refusal(name, side, sorted(item_ids), lost, bool(edited)))
             tx = self.transaction(view)
-            keep = []
-            for conflict in view.conflicts:
-                if conflict.item_id not in wanted:
-                    keep.append(conflict)
-                    continue
-                change = _resolution(conflict, side, edited.get(conflict.item_id))
+            for item_id, change in settled.items():
                 if change is None:
-                    tx.unstage(conflict.item_id)
+                    tx.unstage(item_id)
                 else:
                     tx.stage(change)
-            view.changes, view.conflicts = tx.changes, keep
+            view.changes = tx.changes
+            view.conflicts = [c for c in view.conflicts if c.item_id not in wanted]
         return sorted(wanted)
 
 
-def _resolution(conflict: Conflict, side: Side, edited: bytes | None) -> Change | None:
-    """The change that settles one conflict (None: keep theirs, stage nothing)."""
-    theirs_gone = conflict.theirs.removed
-    if edited is not None:
-        return Change(Op.UPDATE, conflict.table, conflict.item_id, conflict.chunk_id, edited)
-    ours = conflict.ours
-    if side == "theirs" or ours is None:
-        return None
-    if ours.op is Op.REMOVE:
-        return None if theirs_gone else ours
-    # The item exists now (theirs), so our insert or update becomes an update.
-    return Change(Op.UPDATE, ours.table, ours.item_id, ours.chunk_id, ours.data)
+def _refusal(name: str, side: Side, given: list[ItemId], lost: list[ItemId], edited: bool) -> str:
+    """One line: which staged edits a resolution would discard, and what to run."""
+    mapctl, ids = mapctl_in(name), "".join(f" {i}" for i in given)
+    items = f"item {lost[0]} holds" if len(lost) == 1 else f"items {', '.join(lost)} hold"
+    if edited:  # only an interactive resolve edits; it shows the staged edit first
+        return (
+            f"{items} an edit staged after the conflict, which the edited payload would "
+            f"replace; run `{mapctl} resolve{ids}` again on a terminal to edit from it"
+        )
+    return (
+        f"{items} an edit staged after the conflict, which --{side} would discard; "
+        f"run `{mapctl} resolve --{side} --force{ids}` to discard it, "
+        f"or `{mapctl} resolve --ours{ids}` to keep it"
+    )

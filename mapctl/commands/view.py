@@ -198,10 +198,18 @@ def commit(session: Session, message: str, as_json: bool) -> None:
         render.line(f"nothing to write; view {session.view} closed")
 
 
-def _show_conflict(c: dict[str, Any]) -> None:
-    sides = {"base": c["base"], "ours": c["ours"], "theirs": c["theirs"]}
+def _staged(info: dict[str, Any]) -> dict[str, Any]:
+    """From a `diff` result: item -> what is staged for it now (None: a removal)."""
+    return {ch["id"]: ch["ours"] for ch in info["changes"]}
+
+
+def _show_conflict(c: dict[str, Any], staged: dict[str, Any]) -> None:
+    """One conflict, with "ours" being what is staged now if the user staged an
+    edit after the conflict (that is what `resolve --ours` keeps)."""
     from mapctl import render
 
+    ours = ("ours (staged)", staged[c["id"]]) if c["id"] in staged else ("ours", c["ours"])
+    sides = {"base": c["base"], ours[0]: ours[1], "theirs": c["theirs"]}
     render.side_by_side(f"conflict {c['table']} {c['id']}", sides, conflict=True)
 
 
@@ -222,20 +230,26 @@ def diff(session: Session, as_json: bool) -> None:
         sides = {"base": ch["base"], "ours": ch["ours"]}
         render.side_by_side(f"{ch['op']} {ch['table']} {ch['id']}", sides)
     for c in info["conflicts"]:
-        _show_conflict(c)
+        _show_conflict(c, _staged(info))
 
 
-def _pick(conflict: dict[str, Any]) -> tuple[str, Any]:
+def _pick(conflict: dict[str, Any], staged: dict[str, Any]) -> tuple[str, Any]:
     """Ask how to settle one conflict on a TTY: ours, theirs, edit or skip."""
-    _show_conflict(conflict)
+    _show_conflict(conflict, staged)
     answer = click.prompt(
         "keep [o]urs, [t]heirs, [e]dit, [s]kip",
         type=click.Choice(["o", "t", "e", "s"]),
         default="s",
     )
+    item = conflict["id"]
+    if answer == "t" and item in staged:
+        # Theirs would drop the user's own merge: only on a second, explicit yes.
+        asked = f"discard the edit of {item} staged after the conflict?"
+        return ("theirs", None) if click.confirm(asked, default=False) else ("skip", None)
     if answer != "e":
         return {"o": "ours", "t": "theirs", "s": "skip"}[answer], None
-    start = conflict["ours"] if conflict["ours"] is not None else conflict["theirs"]
+    ours = staged[item] if item in staged else conflict["ours"]
+    start = ours if ours is not None else conflict["theirs"]
     text = click.edit(json.dumps(start, indent=2) + "\n", extension=".json")
     if text is None:
         return "skip", None
@@ -245,47 +259,66 @@ def _pick(conflict: dict[str, Any]) -> tuple[str, Any]:
         raise click.BadParameter(f"the edited text is not JSON: {exc}") from exc
 
 
+def _ask_each(session: Session, info: dict[str, Any], items: tuple[str, ...]) -> list[str]:
+    """Settle the conflicts (those of `items`, if any) one by one on a terminal."""
+    wanted = [session.call("match_conflict", view=session.view, text=t) for t in items]
+    staged, resolved = _staged(info), []
+    for conflict in info["conflicts"]:
+        if wanted and conflict["id"] not in wanted:
+            continue
+        choice, fields = _pick(conflict, staged)
+        if choice == "skip":
+            continue
+        # A staged edit was in view when the user chose (confirmed, or edited
+        # from it), so it may go; one staged meanwhile elsewhere is still refused.
+        result = session.call(
+            "resolve",
+            view=session.view,
+            side="theirs" if choice == "theirs" else "ours",
+            items=[conflict["id"]],
+            edited={conflict["id"]: fields} if choice == "edit" else None,
+            force=conflict["id"] in staged,
+        )
+        resolved += result["resolved"]
+    return resolved
+
+
 @click.command("resolve")
 @click.argument("items", nargs=-1, metavar="[ID ...]")
-@click.option("--ours", "side", flag_value="ours", help="Keep our side.")
+@click.option("--ours", "side", flag_value="ours", help="Keep our side: what the view stages now.")
 @click.option("--theirs", "side", flag_value="theirs", help="Keep their side.")
+@click.option(
+    "--force", is_flag=True, help="Also discard edits staged after the conflict (with --theirs)."
+)
 @json_option
 @pass_session
-def resolve(session: Session, items: tuple[str, ...], side: str | None, as_json: bool) -> None:
-    """Settle conflicts (all, or the IDs given). On a TTY with neither flag, ask per conflict."""
+def resolve(
+    session: Session, items: tuple[str, ...], side: str | None, force: bool, as_json: bool
+) -> None:
+    """Settle conflicts (all, or the IDs given). On a TTY with neither flag, ask per conflict.
+
+    An edit staged after the conflict is what --ours keeps; --theirs refuses to
+    discard it unless --force is given.
+    """
     from mapapi import UsageError, ViewClosedError
     from mapctl import render
 
-    conflicts = session.call("diff", view=session.view)["conflicts"]
-    if not conflicts:
+    info = session.call("diff", view=session.view)
+    if not info["conflicts"]:
         raise ViewClosedError(f"view {session.view!r} has no conflicts to resolve")
     if side in ("ours", "theirs"):
-        info = session.call("resolve", view=session.view, side=side, items=list(items))
+        result = session.call(
+            "resolve", view=session.view, side=side, items=list(items), force=force
+        )
     elif sys.stdin.isatty():
-        resolved: list[str] = []
-        wanted = [session.call("match_conflict", view=session.view, text=t) for t in items]
-        for conflict in conflicts:
-            if wanted and conflict["id"] not in wanted:
-                continue
-            choice, fields = _pick(conflict)
-            if choice == "skip":
-                continue
-            edited = {conflict["id"]: fields} if choice == "edit" else None
-            result = session.call(
-                "resolve",
-                view=session.view,
-                side="theirs" if choice == "theirs" else "ours",
-                items=[conflict["id"]],
-                edited=edited,
-            )
-            resolved += result["resolved"]
-        info = {"resolved": resolved, "remaining": len(conflicts) - len(resolved)}
+        resolved = _ask_each(session, info, items)
+        result = {"resolved": resolved, "remaining": len(info["conflicts"]) - len(resolved)}
     else:
         raise UsageError("say --ours or --theirs (no terminal to ask on)")
     if as_json:
-        render.emit_json(info)
+        render.emit_json(result)
     else:
-        done, left = len(info["resolved"]), info["remaining"]
+        done, left = len(result["resolved"]), result["remaining"]
         render.line(f"resolved {done} conflict(s); {left} left", "green")
 
 

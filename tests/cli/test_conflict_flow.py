@@ -16,7 +16,7 @@ import pytest
 
 from mapapi import ConflictError, UnresolvedConflicts, UsageError, ViewClosedError
 from mapctl.commands import view as view_commands
-from tests.cli.conftest import Mapctl
+from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl
 
 BASE = {"x": 1.0, "label": "dock"}
 ALICE = {"x": 2.0, "label": "dock"}
@@ -204,6 +204,85 @@ class TestResolve:
         assert sorted(r["id"] for r in points.json("ls", "pts")["items"]) == sorted([item, added])
 
 
+MERGED = {"x": 2.5, "label": "charger"}
+
+
+def _edit_after(points: Mapctl, *values: dict[str, Any]) -> list[str]:
+    """A conflict in bob's view, then bob stages his own merge of the first item."""
+    ids = _conflict(points, *values)
+    points("set", "pts", ids[0], json.dumps(MERGED), view="bob")
+    return ids
+
+
+class TestEditStagedAfterTheConflict:
+    """`resolve` never discards what the view staged after the conflict without a choice."""
+
+    def test_ours_keeps_the_edit_staged_now(self, points: Mapctl) -> None:
+        (item,) = _edit_after(points, BASE)
+        assert points.json("resolve", "--ours", view="bob") == {"resolved": [item], "remaining": 0}
+        points.commit("bob merged", view="bob")
+        assert points.json("get", "pts", item) == MERGED
+
+    def test_ours_keeps_a_removal_staged_now(self, points: Mapctl) -> None:
+        (item,) = _conflict(points, BASE)
+        points("rm", "pts", item, view="bob")
+        points("resolve", "--ours", view="bob")
+        points.commit(view="bob")
+        assert points.json("ls", "pts") == {"items": []}
+
+    def test_theirs_refuses_with_the_command_to_run(self, points: Mapctl) -> None:
+        (item,) = _edit_after(points, BASE)
+        outcome = points.main("resolve", "--theirs", view="bob")
+        assert outcome.code == 2
+        (line,) = outcome.err_lines
+        assert item in line
+        assert "`mapctl --view bob resolve --theirs --force`" in line
+        assert [c["id"] for c in points.json("diff", view="bob")["conflicts"]] == [item]
+        assert points.json("get", "pts", item, view="bob") == MERGED
+
+    def test_the_refusal_repeats_the_ids_given(self, points: Mapctl) -> None:
+        first, _second = _edit_after(points, BASE, {"x": 10.0})
+        outcome = points.main("resolve", "--theirs", first[:6], view="bob")
+        assert outcome.code == 2
+        assert f"`mapctl --view bob resolve --theirs --force {first}`" in outcome.err
+
+    def test_nothing_is_resolved_when_one_item_refuses(self, points: Mapctl) -> None:
+        first, second = _edit_after(points, BASE, {"x": 10.0})
+        assert points.main("resolve", "--theirs", view="bob").code == 2
+        conflicts = points.json("diff", view="bob")["conflicts"]
+        assert sorted(c["id"] for c in conflicts) == sorted([first, second])
+
+    def test_theirs_force_discards_the_edit(self, points: Mapctl) -> None:
+        (item,) = _edit_after(points, BASE)
+        assert points.json("resolve", "--theirs", "--force", view="bob")["remaining"] == 0
+        assert points.commit(view="bob") == {"commit": None}
+        assert points.json("get", "pts", item) == ALICE
+
+    async def test_through_the_peer_daemon(self, daemon: InProcessDaemon) -> None:
+        for args in (("table", "create", "pts", "--type", STRUCT), ("chunk", "create", "pts")):
+            assert (await daemon(*args)).code == 0
+        item = (await daemon.json("set", "pts", json.dumps(BASE)))["id"]
+        assert (await daemon("commit")).code == 0
+        for view, value in (("alice", ALICE), ("bob", BOB)):
+            assert (await daemon("view", "open", view=view)).code == 0
+            assert (await daemon("set", "pts", item, json.dumps(value), view=view)).code == 0
+        assert (await daemon("commit", view="alice")).code == 0
+        assert (await daemon("commit", view="bob")).code == 3
+        assert (await daemon("set", "pts", item, json.dumps(MERGED), view="bob")).code == 0
+        refused = await daemon("resolve", "--theirs", view="bob")
+        assert refused.code == 2
+        assert "`mapctl --view bob resolve --theirs --force`" in refused.err
+        assert (await daemon("resolve", "--theirs", "--force", view="bob")).code == 0
+        assert await daemon.json("get", "pts", item, view="bob") == ALICE
+
+    def test_diff_shows_the_staged_edit_as_ours(self, points: Mapctl) -> None:
+        (item,) = _edit_after(points, BASE)
+        out = points("diff", view="bob")
+        assert f"conflict pts {item}" in out
+        assert "ours (staged)" in out
+        assert "2.5" in out
+
+
 class TestRemoveVersusUpdate:
     def test_they_removed_we_updated(self, points: Mapctl) -> None:
         (item,) = _seed(points, BASE)
@@ -335,6 +414,48 @@ class TestInteractiveResolve:
         assert json.loads(seen[0]) == ALICE
         points.commit(view="bob")
         assert points.json("get", "pts", item) == ALICE
+
+
+class TestInteractiveResolveOfAStagedEdit:
+    """On a terminal, a choice that would discard an edit staged after the conflict asks."""
+
+    @pytest.fixture(autouse=True)
+    def tty(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch.setattr(view_commands, "sys", _Terminal)
+
+    def test_ours_keeps_the_staged_edit(self, points: Mapctl) -> None:
+        (item,) = _edit_after(points, BASE)
+        out = points("resolve", view="bob", input="o\n")
+        assert "ours (staged)" in out
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == MERGED
+
+    @pytest.mark.parametrize(("confirm", "expected"), [("n", MERGED), ("y", ALICE)])
+    def test_theirs_asks_first(
+        self, points: Mapctl, confirm: str, expected: dict[str, Any]
+    ) -> None:
+        (item,) = _edit_after(points, BASE)
+        out = points("resolve", view="bob", input=f"t\n{confirm}\n")
+        assert f"discard the edit of {item} staged after the conflict" in out
+        assert points.json("get", "pts", item, view="bob") == expected
+        remaining = points.json("diff", view="bob")["conflicts"]
+        assert len(remaining) == (1 if confirm == "n" else 0)
+
+    def test_edit_starts_from_the_staged_edit(
+        self, points: Mapctl, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        (item,) = _edit_after(points, BASE)
+        seen: list[str] = []
+
+        def edit(text: str, extension: str = ".txt") -> str:
+            seen.append(text)
+            return json.dumps({"x": 2.75})
+
+        monkeypatch.setattr(click, "edit", edit)
+        points("resolve", view="bob", input="e\n")
+        assert json.loads(seen[0]) == MERGED
+        points.commit(view="bob")
+        assert points.json("get", "pts", item) == {"x": 2.75}
 
 
 class TestSerializableView:
