@@ -184,8 +184,9 @@ def _grow(
         if box is None:
             continue
         boxes.append(box)
-        if extent.label is not None:
-            missions.add(extent.label(message))
+        label = extent.label(message) if extent.label is not None else ""
+        if label:  # a row that names no mission belongs to none
+            missions.add(label)
     if not boxes:
         return None
     return SpatialRef(chunk, table, BBox.enclosing(boxes), tuple(sorted(missions)))

@@ -9,7 +9,8 @@ The built-in extents:
   ``mapctl set`` can be placed in space;
 - ``mapapi.v1.Mission`` (its ``bbox``, labelled with its name),
   ``mapapi.v1.Vertex`` (its position), ``mapapi.v1.Landmark`` (its position)
-  and ``mapapi.v1.PointCloudBlock`` (its ``bbox``).
+  and ``mapapi.v1.PointCloudBlock`` (its ``bbox``), each labelled with the
+  name of the mission it belongs to.
 
 Other types can be added with `register_extent`.
 """
@@ -61,6 +62,10 @@ def _struct_box(message: Any) -> BBox | None:
         return None  # not a box: the item is simply not placed in space
 
 
+def _mission_of(message: Any) -> str:
+    return str(message.mission)
+
+
 def _optional_box3(message: Any) -> BBox | None:
     return _box3(message.bbox) if message.HasField("bbox") else None
 
@@ -68,9 +73,11 @@ def _optional_box3(message: Any) -> BBox | None:
 _EXTENTS: dict[str, Extent] = {
     "google.protobuf.Struct": Extent(_struct_box),
     "mapapi.v1.Mission": Extent(_optional_box3, label=lambda m: str(m.name)),
-    "mapapi.v1.Vertex": Extent(lambda m: _point(m.pose)),
-    "mapapi.v1.Landmark": Extent(lambda m: _point(m.position)),
-    "mapapi.v1.PointCloudBlock": Extent(_optional_box3),
+    # A mission's vertices, landmarks and clouds are labelled with its name too,
+    # so a query that finds only them still says which missions they belong to.
+    "mapapi.v1.Vertex": Extent(lambda m: _point(m.pose), label=_mission_of),
+    "mapapi.v1.Landmark": Extent(lambda m: _point(m.position), label=_mission_of),
+    "mapapi.v1.PointCloudBlock": Extent(_optional_box3, label=_mission_of),
 }
 
 

@@ -257,18 +257,20 @@ class Peer:
         if held:
             ids = self.store.holders(ref.chunk) or [self.id]
             return PlacedChunk(ref, tuple(self._member(p) for p in ids), held=True)
-        from mapapi.net.messages import Member
+        return PlacedChunk(ref, tuple(self._member(p, a) for p, a in ref.holders), held=False)
 
-        return PlacedChunk(ref, tuple(Member(p, a) for p, a in ref.holders), held=False)
-
-    def _member(self, peer: PeerId) -> Member:
+    def _member(self, peer: PeerId, address: str | None = None) -> Member:
+        """`peer` with its name when this peer knows it; `address` (where the
+        spatial index says it serves the chunk) replaces the member list's."""
         from mapapi.net.messages import Member
 
         if peer == self.id:
-            address = self.swarm.address if self.swarm is not None else ""
-            return Member(self.id, address, self.name)
+            here = self.swarm.address if self.swarm is not None else ""
+            return Member(self.id, here if address is None else address, self.name)
         known = self.swarm.members.get(peer) if self.swarm is not None else None
-        return known or Member(peer, "")
+        if known is None:
+            return Member(peer, address or "")
+        return known if address is None else Member(peer, address, known.name)
 
     async def __aenter__(self) -> Peer:
         return self

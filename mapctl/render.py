@@ -7,6 +7,7 @@ conflict yellow); scripts get exact JSON with `--json`.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
@@ -29,15 +30,27 @@ def line(text: str, style: str | None = None) -> None:
     console.print(Text(text, style=style or ""))
 
 
-def table(title: str, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
-    """A rich table; an empty listing says so instead of drawing nothing."""
+def table(
+    title: str,
+    columns: Sequence[str],
+    rows: Iterable[Sequence[Any]],
+    *,
+    no_wrap: Iterable[str] = (),
+) -> None:
+    """A rich table; an empty listing says so instead of drawing nothing.
+
+    Args:
+        no_wrap: columns whose cells stay on one line (they may be cut with "…"
+            on a narrow terminal rather than broken over lines).
+    """
     rows = list(rows)
     if not rows:
         line(f"no {title}", "dim")
         return
+    kept = set(no_wrap)
     grid = Table(title=title, title_justify="left")
     for column in columns:
-        grid.add_column(column)
+        grid.add_column(column, no_wrap=column in kept)
     for row in rows:
         grid.add_row(*("" if v is None else str(v) for v in row))
     console.print(grid)
@@ -46,6 +59,24 @@ def table(title: str, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> 
 def records(title: str, rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> None:
     """A table of JSON records, one column per key in `columns`."""
     table(title, [c.replace("_", " ") for c in columns], [[r[c] for c in columns] for r in rows])
+
+
+BOX_STEP = 0.1  # metres: what a person reading a box needs, not the float's 17 digits
+
+
+def box_text(bbox: Sequence[float]) -> str:
+    """A box (xmin, ymin, zmin, xmax, ymax, zmax) for humans, per axis, e.g.
+    "x -300..-280 y 200..230 z 0..4.1": the min corner rounded down and the max
+    corner up to 0.1 m, so the box shown contains the box stored."""
+    low = [_step(v, math.floor) for v in bbox[:3]]
+    high = [_step(v, math.ceil) for v in bbox[3:]]
+    return " ".join(f"{axis} {lo}..{hi}" for axis, lo, hi in zip("xyz", low, high, strict=True))
+
+
+def _step(value: float, to_int: Callable[[float], int]) -> str:
+    # round() first: 0.3 / 0.1 is 2.9999999999999996, which floor would take to 0.2
+    steps = to_int(round(value / BOX_STEP, 6))
+    return f"{steps * BOX_STEP:.1f}".removesuffix(".0") if steps else "0"
 
 
 def pretty_json(value: Any) -> None:

@@ -69,13 +69,22 @@ def query_bbox(
                 r["chunk"][:8],
                 r["table"],
                 ", ".join(r["missions"]) or "-",
-                " ".join(f"{v:g}" for v in r["bbox"]),
-                ", ".join(h["name"] or h["id"][:8] for h in r["holders"]) or "?",
+                render.box_text(r["bbox"]),
+                ", ".join(_holder(h, session.verbose) for h in r["holders"]) or "?",
                 "yes" if r["held"] else "no",
             )
             for r in results
         ],
+        no_wrap=["bbox"],
     )
+
+
+def _holder(holder: dict[str, str], verbose: bool) -> str:
+    """A holder by name (its short id too with -v); by short id if its name is unknown."""
+    short = holder["id"][:8]
+    if not holder["name"]:
+        return short
+    return f"{holder['name']} ({short})" if verbose else holder["name"]
 
 
 def register(cli: click.Group) -> None:

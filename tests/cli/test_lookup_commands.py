@@ -15,7 +15,7 @@ from mapapi import Repository
 from mapapi.spatial import BBox, SpatialGrid
 from mapctl.cli import cli
 
-from .conftest import STRUCT, Mapctl, run_main
+from .conftest import STRUCT, InProcessDaemon, Mapctl, run_main
 
 EXIT_USAGE = 2
 
@@ -101,7 +101,66 @@ class TestQueryBbox:
         shown = mapctl("query-bbox", "-5000", "-5000", "-500", "5000", "5000", "500")
         assert hall[:8] in shown
         assert lab[:8] in shown
-        assert "-300 200 0 -280 230 4" in shown
+        assert "x -300..-280 y 200..230 z 0..4" in shown
+
+    def test_the_table_view_rounds_the_box_onto_one_line(self, mapctl: Mapctl) -> None:
+        mapctl("table", "create", "rooms", "--type", STRUCT)
+        mapctl("chunk", "create", "rooms")
+        box = [-12.345678901, 0.123456789, -0.04, 12.3456789012, 7.777777777, 2.0000001]
+        mapctl("set", "rooms", json.dumps({"bbox": box}))
+        mapctl.commit("an odd room")
+
+        query = ("query-bbox", "-20", "-20", "-1", "20", "20", "3")
+        shown = mapctl(*query)
+
+        # rounded outwards to 0.1 m, so the box shown contains the one stored
+        line = next(line for line in shown.splitlines() if "rooms" in line)
+        assert "x -12.4..12.4 y 0.1..7.8 z -0.1..2.1" in line
+        assert mapctl.json(*query)["results"][0]["bbox"] == box  # --json: full precision
+
+    def test_a_chunk_of_vertices_lists_its_missions(self, mapctl: Mapctl) -> None:
+        mapctl("table", "create", "vertices", "--type", "mapapi.v1.Vertex")
+        chunk = mapctl("chunk", "create", "vertices").strip()
+        for mission, x in (("hall", 1.0), ("lab", 2.0), ("hall", 3.0)):
+            vertex = {"mission": mission, "index": 0, "pose": {"x": x, "qw": 1}}
+            mapctl("set", "vertices", json.dumps(vertex))
+        mapctl("set", "vertices", json.dumps({"index": 9, "pose": {"x": 2.5}}))  # no mission
+        mapctl.commit("vertices of two missions")
+
+        (found,) = mapctl.json("query-bbox", "0", "-1", "-1", "4", "1", "1")["results"]
+
+        assert (found["chunk"], found["missions"], found["kind"]) == (
+            chunk,
+            ["hall", "lab"],
+            "mission",
+        )
+        assert "hall, lab" in mapctl("query-bbox", "0", "-1", "-1", "4", "1", "1")
+
+
+class TestQueryBboxInASwarm:
+    async def test_holders_of_chunks_held_elsewhere_carry_their_names(
+        self, daemon: InProcessDaemon, tmp_path: Path
+    ) -> None:
+        other = InProcessDaemon(Repository.init(tmp_path / "other", "other").root)
+        record = await other.start()
+        try:
+            await daemon.json("join", record.join)
+            await other("table", "create", "rooms", "--type", STRUCT)
+            chunk = (await other.json("chunk", "create", "rooms"))["id"]
+            await other("set", "rooms", json.dumps({"bbox": [0, 0, 0, 1, 1, 1]}))
+            await other("commit", "-m", "a room")
+
+            found = await daemon.json("query-bbox", "0", "0", "0", "1", "1", "1")
+            shown = await daemon("query-bbox", "0", "0", "0", "1", "1", "1")
+            verbose = await daemon("-v", "query-bbox", "0", "0", "0", "1", "1", "1")
+        finally:
+            await other.close()
+
+        (result,) = found["results"]
+        assert (result["chunk"], result["held"]) == (chunk, False)
+        assert result["holders"] == [{"id": record.id, "name": "other", "address": record.address}]
+        assert "other" in shown.out
+        assert f"other ({record.id[:8]})" in verbose.out
 
     @pytest.mark.parametrize(
         ("bbox", "message"),

@@ -53,7 +53,7 @@ def test_a_peer_that_never_saw_a_chunk_finds_it_by_id_and_by_box(daemons: Daemon
                 "table": "rooms",
                 "missions": [],
                 "bbox": [-300.0, 200.0, 0.0, -280.0, 230.0, 4.0],
-                "holders": [{"id": b.id, "name": "", "address": b.address}],
+                "holders": [{"id": b.id, "name": "b", "address": b.address}],
                 "held": False,
             }
         ]

@@ -53,10 +53,11 @@ async def test_an_imported_graph_is_found_by_its_mission_box_elsewhere(
     assert hit.ref.chunk == result.chunks[MISSIONS]
     assert hit.ref.bbox == result.bbox
     assert ([m.id for m in hit.holders], hit.held) == ([a.id], False)
-    # the vertices are placed too; the edges, which have no place, are not
+    # the vertices are placed too (labelled with their mission); the edges, which
+    # have no place, are not
     assert await found_by_table(b, BBox(-100, -100, -10, 100, 100, 10)) == {
         MISSIONS: [("intel",)],
-        VERTICES: [()],
+        VERTICES: [("intel",)],
     }
     assert await c.query_bbox(BBox(50, 50, -1, 60, 60, 1)) == []
 
@@ -75,7 +76,7 @@ async def test_a_point_cloud_is_found_and_loaded_from_another_peer(make_peer: Ma
 
     assert {h.ref.table: h.ref.missions for h in hits} == {
         MISSIONS: ("room_scan1",),
-        CLOUDS: (),
+        CLOUDS: ("room_scan1",),
     }
     for hit in hits:
         await b.participate(hit.ref.chunk)
