@@ -16,7 +16,14 @@ from typing import TextIO
 
 from mapapi.errors import UsageError
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, chain_odometry
+from mapapi.maps.graph import (
+    NO_ORIGIN,
+    EdgeKind,
+    GraphEdge,
+    MissionGraph,
+    Origin,
+    chain_odometry,
+)
 from mapapi.maps.se3 import Pose, from_se2, is_planar, lift_information, project_information, yaw
 
 Progress = Callable[[int, int], None]  # (lines read, 0: total unknown while streaming)
@@ -65,32 +72,19 @@ def parse_g2o(
     dims: set[int] = set()
     number = 0
     for number, line in enumerate(lines, 1):
-        parts = line.split()
-        if not parts or parts[0].startswith("#") or parts[0] in _IGNORED:
+        parsed = _record(line, source, number)
+        if parsed is None:
             continue
-        tag = parts[0]
-        arity = _ARITY.get(tag)
-        if arity is None:
-            raise MapImportError(
-                f"unsupported record {tag!r}; expected one of {', '.join(_ARITY)}",
-                source=source,
-                line=number,
-            )
-        if len(parts) != arity + 1:
-            raise MapImportError(
-                f"{tag} needs {arity} values, found {len(parts) - 1}", source=source, line=number
-            )
-        try:
-            values = _numbers(parts)
-        except ValueError as exc:
-            raise MapImportError(f"{tag}: {exc}", source=source, line=number) from None
+        tag, values = parsed
         dims.add(2 if tag.endswith("SE2") else 3)
         if len(dims) > 1:
             raise MapImportError("2D and 3D records mixed in one graph", source=source, line=number)
+        origin = Origin(number, line.rstrip("\r\n"))
         if tag.startswith("VERTEX"):
             _add_vertex(graph, tag, values, source, number)
+            graph.origins[_index(values[0], source, number)] = origin
         else:
-            graph.edges.append(_edge(mission, tag, values, source, number))
+            graph.edges.append(_edge(mission, tag, values, source, number, origin))
         if progress is not None and number % _PROGRESS_EVERY == 0:
             progress(number, 0)
     graph.planar = dims == {2}
@@ -99,6 +93,34 @@ def parse_g2o(
     if progress is not None:
         progress(number, number)
     return graph
+
+
+def _record(line: str, source: str, number: int) -> tuple[str, list[float]] | None:
+    """(tag, values) of one line; None for a blank, comment or ignored line.
+
+    Raises:
+        MapImportError: an unknown record, a wrong number of values, or a value
+            that is not a finite number.
+    """
+    parts = line.split()
+    if not parts or parts[0].startswith("#") or parts[0] in _IGNORED:
+        return None
+    tag = parts[0]
+    arity = _ARITY.get(tag)
+    if arity is None:
+        raise MapImportError(
+            f"unsupported record {tag!r}; expected one of {', '.join(_ARITY)}",
+            source=source,
+            line=number,
+        )
+    if len(parts) != arity + 1:
+        raise MapImportError(
+            f"{tag} needs {arity} values, found {len(parts) - 1}", source=source, line=number
+        )
+    try:
+        return tag, _numbers(parts)
+    except ValueError as exc:
+        raise MapImportError(f"{tag}: {exc}", source=source, line=number) from None
 
 
 def _numbers(parts: list[str]) -> list[float]:
@@ -130,15 +152,18 @@ def _add_vertex(graph: MissionGraph, tag: str, v: list[float], source: str, line
     index = _index(v[0], source, line)
     if index in graph.vertices:
         raise MapImportError(f"vertex {index} is defined twice", source=source, line=line)
+    graph.vertices[index] = _vertex_pose(tag, v, source, line)
+
+
+def _vertex_pose(tag: str, v: list[float], source: str, line: int) -> Pose:
     if tag == "VERTEX_SE2":
-        graph.vertices[index] = from_se2(v[1], v[2], v[3])
-    else:
-        graph.vertices[index] = _quaternion(
-            (v[1], v[2], v[3], v[4], v[5], v[6], v[7]), source, line
-        )
+        return from_se2(v[1], v[2], v[3])
+    return _quaternion((v[1], v[2], v[3], v[4], v[5], v[6], v[7]), source, line)
 
 
-def _edge(mission: str, tag: str, v: list[float], source: str, line: int) -> GraphEdge:
+def _edge(
+    mission: str, tag: str, v: list[float], source: str, line: int, origin: Origin = NO_ORIGIN
+) -> GraphEdge:
     i, j = _index(v[0], source, line), _index(v[1], source, line)
     if tag == "EDGE_SE2":
         relative = from_se2(v[2], v[3], v[4])
@@ -147,7 +172,7 @@ def _edge(mission: str, tag: str, v: list[float], source: str, line: int) -> Gra
         relative = _quaternion((v[2], v[3], v[4], v[5], v[6], v[7], v[8]), source, line)
         information = tuple(v[9:30])
     kind = EdgeKind.ODOMETRY if j == i + 1 else EdgeKind.LOOP
-    return GraphEdge((mission, i), (mission, j), relative, information, kind)
+    return GraphEdge((mission, i), (mission, j), relative, information, kind, origin)
 
 
 def looks_planar(graph: MissionGraph) -> bool:
@@ -165,9 +190,13 @@ def looks_planar(graph: MissionGraph) -> bool:
 def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -> int:
     """Write a mission as g2o text; returns how many edges were written.
 
-    Edges to other missions' vertices cannot be expressed in one g2o file and
-    are left out. Floats are written in their shortest exact form, so a 3D
-    export reads back to the same numbers.
+    Records come in their import order (`Origin.line`; vertices without one
+    first, by index), and a record whose original text still says what it
+    holds is written as that text, so an imported file comes back byte for
+    byte (less its comments, blank and FIX lines). Other records are written
+    from their values, floats in their shortest exact form, so a 3D export
+    reads back to the same numbers. Edges to other missions' vertices cannot be
+    expressed in one g2o file and are left out.
 
     Args:
         planar: write VERTEX_SE2/EDGE_SE2; default: when the graph came from 2D.
@@ -179,24 +208,62 @@ def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -
         planar = graph.planar
     if planar and not all(is_planar(p) for p in graph.vertices.values()):
         raise UsageError(f"mission {graph.name!r} is not planar; export it as 3D")
-    for index, pose in sorted(graph.vertices.items()):
-        if planar:
-            out.write(f"VERTEX_SE2 {index} {pose[0]!r} {pose[1]!r} {yaw(pose)!r}\n")
-        else:
-            out.write(f"VERTEX_SE3:QUAT {index} {_join(pose)}\n")
-    written = 0
-    for edge in graph.edges:
-        if edge.source[0] != graph.name or edge.target[0] != graph.name:
-            continue
-        ends = f"{edge.source[1]} {edge.target[1]}"
-        rel = edge.relative
-        if planar:
-            info = _join(project_information(edge.information))
-            out.write(f"EDGE_SE2 {ends} {rel[0]!r} {rel[1]!r} {yaw(rel)!r} {info}\n")
-        else:
-            out.write(f"EDGE_SE3:QUAT {ends} {_join(rel)} {_join(edge.information)}\n")
-        written += 1
-    return written
+    lines: list[tuple[int, int, int, str]] = []
+    for index, pose in graph.vertices.items():
+        origin = graph.origins.get(index, NO_ORIGIN)
+        lines.append((origin.line, 0, index, _vertex_line(index, pose, origin, planar)))
+    for position, edge in enumerate(graph.edges):
+        if edge.source[0] == graph.name and edge.target[0] == graph.name:
+            lines.append((edge.origin.line, 1, position, _edge_line(edge, planar)))
+    lines.sort(key=lambda record: record[:3])
+    out.writelines(f"{text}\n" for *_, text in lines)
+    return sum(1 for record in lines if record[1] == 1)
+
+
+def _vertex_line(index: int, pose: Pose, origin: Origin, planar: bool) -> str:
+    """The vertex's original text while it still says `index` and `pose`, else
+    the line its values give."""
+    read = _reread(origin, planar)
+    if read is not None and read[1][0] == index and _vertex_pose(*read, "", 0) == pose:
+        return origin.text
+    if planar:
+        return f"VERTEX_SE2 {index} {pose[0]!r} {pose[1]!r} {yaw(pose)!r}"
+    return f"VERTEX_SE3:QUAT {index} {_join(pose)}"
+
+
+def _edge_line(edge: GraphEdge, planar: bool) -> str:
+    """The edge's original text while it still says what the edge holds, else
+    the line its values give."""
+    read = _reread(edge.origin, planar)
+    if read is not None:
+        again = _edge(edge.source[0], *read, "", 0)
+        if (again.source, again.target, again.relative, again.information) == (
+            edge.source,
+            edge.target,
+            edge.relative,
+            edge.information,
+        ):
+            return edge.origin.text
+    ends = f"{edge.source[1]} {edge.target[1]}"
+    rel = edge.relative
+    if planar:
+        info = _join(project_information(edge.information))
+        return f"EDGE_SE2 {ends} {rel[0]!r} {rel[1]!r} {yaw(rel)!r} {info}"
+    return f"EDGE_SE3:QUAT {ends} {_join(rel)} {_join(edge.information)}"
+
+
+def _reread(origin: Origin, planar: bool) -> tuple[str, list[float]] | None:
+    """(tag, values) of an original line of the dimension being written; None
+    when there is none (or it no longer parses, which a stored row never should)."""
+    if not origin.text:
+        return None
+    try:
+        read = _record(origin.text, "", 0)
+    except (MapImportError, ValueError):
+        return None
+    if read is None or read[0].endswith("SE2") != planar:
+        return None
+    return read
 
 
 def _join(values: Iterable[float]) -> str:

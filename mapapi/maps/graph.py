@@ -21,6 +21,23 @@ log = logging.getLogger(__name__)
 VertexKey = tuple[str, int]  # (mission, index)
 
 
+@dataclass(frozen=True, slots=True)
+class Origin:
+    """Where an import read a vertex or edge (`mapapi.v1.Origin`), so export can
+    write the mission back in its order and with its number formatting.
+
+    Attributes:
+        line: the record's line in its file (1-based), 0 when it had none.
+        text: the record's g2o text as read, without the line break ("" if none).
+    """
+
+    line: int = 0
+    text: str = ""
+
+
+NO_ORIGIN = Origin()
+
+
 class EdgeKind(Enum):
     """What an edge measures (values match `mapapi.v1.Edge.Kind`)."""
 
@@ -43,6 +60,7 @@ class GraphEdge:
     relative: Pose
     information: tuple[float, ...]
     kind: EdgeKind
+    origin: Origin = NO_ORIGIN
 
 
 @dataclass(slots=True)
@@ -56,6 +74,7 @@ class MissionGraph:
         vertices: vertex index -> pose (initial estimate).
         edges: the edges this mission owns (inter-robot ones included).
         planar: True when it came from a 2D (SE2) source.
+        origins: vertex index -> where the import read it (absent: nowhere).
     """
 
     name: str
@@ -64,6 +83,7 @@ class MissionGraph:
     vertices: dict[int, Pose] = field(default_factory=dict)
     edges: list[GraphEdge] = field(default_factory=list)
     planar: bool = False
+    origins: dict[int, Origin] = field(default_factory=dict)
 
     def bbox(self) -> BBox | None:
         """The box around the vertex positions (None without vertices)."""

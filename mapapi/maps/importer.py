@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from mapapi.ids import ChunkId, CommitId
 from mapapi.maps.cloud import PointCloud, cloud_blocks
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import GraphEdge, MissionGraph
+from mapapi.maps.graph import NO_ORIGIN, GraphEdge, MissionGraph
 from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
@@ -124,7 +124,10 @@ def build_rows(graph: MissionGraph) -> dict[str, list[Message]]:
                 raise MapImportError(f"an edge names the missing vertex {end[1]}", source=name)
     return {
         MISSIONS: [mission_to_pb(graph)],
-        VERTICES: [vertex_to_pb(name, i, pose) for i, pose in graph.vertices.items()],
+        VERTICES: [
+            vertex_to_pb(name, i, pose, graph.origins.get(i, NO_ORIGIN))
+            for i, pose in graph.vertices.items()
+        ],
         EDGES: [edge_to_pb(name, edge) for edge in graph.edges],
     }
 

@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, chain_odometry
+from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, Origin, chain_odometry
 from mapapi.maps.se3 import isotropic_information
 
 Progress = Callable[[int, int], None]  # (rows read, 0 while the total is unknown)
@@ -120,6 +120,7 @@ class KimeraReader:
                 (tx, ty, tz, qx, qy, qz, qw),
                 isotropic_information(tau, kappa),
                 kind,
+                Origin(self.rows),  # its place among the rows read: the import order
             )
         )
 

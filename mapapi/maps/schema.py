@@ -12,7 +12,7 @@ from typing import Protocol
 from google.protobuf.message import Message
 
 from mapapi._pb.mapapi.v1 import maps_pb2
-from mapapi.maps.graph import EdgeKind, GraphEdge
+from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin
 from mapapi.maps.se3 import Pose
 from mapapi.spatial import BBox
 
@@ -31,6 +31,7 @@ Landmark = maps_pb2.Landmark
 PointCloudBlock = maps_pb2.PointCloudBlock
 Box3 = maps_pb2.Box3
 Pose3 = maps_pb2.Pose3
+OriginPb = maps_pb2.Origin
 
 # table name -> payload class, for the tables a graph (or a cloud) import writes
 GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
@@ -85,9 +86,21 @@ def mission_to_pb(source: MissionSource) -> maps_pb2.Mission:
     return message
 
 
-def vertex_to_pb(mission: str, index: int, pose: Pose) -> maps_pb2.Vertex:
-    """One vertex row."""
-    return Vertex(mission=mission, index=index, pose=pose_to_pb(pose))
+def origin_to_pb(origin: Origin) -> maps_pb2.Origin | None:
+    """An `Origin` as its message; None for no origin (the field stays unset)."""
+    return None if origin == NO_ORIGIN else OriginPb(line=origin.line, text=origin.text)
+
+
+def origin_from_pb(message: maps_pb2.Origin) -> Origin:
+    """An `Origin` message as an `Origin`."""
+    return Origin(message.line, message.text)
+
+
+def vertex_to_pb(
+    mission: str, index: int, pose: Pose, origin: Origin = NO_ORIGIN
+) -> maps_pb2.Vertex:
+    """One vertex row, with where an import read it."""
+    return Vertex(mission=mission, index=index, pose=pose_to_pb(pose), origin=origin_to_pb(origin))
 
 
 def edge_to_pb(mission: str, edge: GraphEdge) -> maps_pb2.Edge:
@@ -96,6 +109,9 @@ def edge_to_pb(mission: str, edge: GraphEdge) -> maps_pb2.Edge:
     message.from_vertex.mission, message.from_vertex.index = edge.source
     message.to_vertex.mission, message.to_vertex.index = edge.target
     message.information.extend(edge.information)
+    origin = origin_to_pb(edge.origin)
+    if origin is not None:
+        message.origin.CopyFrom(origin)
     return message
 
 
@@ -107,4 +123,5 @@ def edge_from_pb(message: maps_pb2.Edge) -> GraphEdge:
         pose_from_pb(message.relative),
         tuple(message.information),
         EdgeKind(message.kind),
+        origin_from_pb(message.origin),
     )

@@ -9,13 +9,13 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator, Iterable
 from contextlib import asynccontextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from mapapi.ids import ChunkId, PeerId
 from mapapi.maps.cloud import PointCloud, cloud_from_blocks
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import MissionGraph
+from mapapi.maps.graph import MissionGraph, Origin
 from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
@@ -92,18 +92,48 @@ async def _mission_row(peer: Peer, tx: Transaction, mission: str) -> Any:
 
 
 async def load_graph(peer: Peer, mission: str) -> MissionGraph:
-    """Read a stored mission back as a `MissionGraph` (vertices by index).
+    """Read a stored mission back as a `MissionGraph`, its vertices and edges in
+    insertion order: by insertion time, then their line in the imported file
+    (vertices without one first, by index), then id. Every peer holding the
+    mission thus reads the same graph in the same order (`write_g2o` keeps it).
 
     Raises:
         MapImportError: no such mission.
     """
     async with reading(peer) as tx:
         row = await _mission_row(peer, tx, mission)
-        vertices = {
-            v.index: pose_from_pb(v.pose) for v in await _rows_of(peer, tx, VERTICES, mission)
-        }
-        edges = [edge_from_pb(e) for e in await _rows_of(peer, tx, EDGES, mission)]
-    return MissionGraph(mission, row.robot, row.frame, dict(sorted(vertices.items())), edges)
+        vertices = await _in_order(peer, tx, VERTICES, mission)
+        edges = await _in_order(peer, tx, EDGES, mission)
+    graph = MissionGraph(mission, row.robot, row.frame)
+    records = [(key, 0, v) for key, v in vertices] + [(key, 1, e) for key, e in edges]
+    records.sort(key=lambda record: (record[0][0], record[0][1], record[1], record[0][2:]))
+    # lines renumbered in that order, so the writer interleaves vertices and edges as read
+    for line, (_, kind, message) in enumerate(records, 1):
+        if kind == 0:
+            graph.vertices[message.index] = pose_from_pb(message.pose)
+            graph.origins[message.index] = Origin(line, message.origin.text)
+        else:
+            edge = edge_from_pb(message)
+            graph.edges.append(replace(edge, origin=Origin(line, edge.origin.text)))
+    return graph
+
+
+async def _in_order(
+    peer: Peer, tx: Transaction, table: str, mission: str
+) -> list[tuple[tuple[int, int, int, str], Any]]:
+    """The mission's rows of `table` with their sort keys: (insertion time,
+    line, index (vertices), id)."""
+    if table not in peer.tables():
+        return []
+    decode = peer.table(table).decode
+    rows = []
+    for revision in await peer.scan(tx.begin_time, table, None):
+        message: Any = decode(revision.data)
+        if message.mission == mission:
+            index = message.index if table == VERTICES else 0
+            key = (revision.insert_time, message.origin.line, index, str(revision.item_id))
+            rows.append((key, message))
+    return rows
 
 
 async def load_cloud(peer: Peer, mission: str) -> PointCloud:

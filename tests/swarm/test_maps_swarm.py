@@ -131,3 +131,20 @@ async def test_traffic_counts_what_the_transport_moved(make_peer: MakePeer) -> N
     assert received > 2_512 * 21 * 8  # at least the edges' information matrices
     assert sum(after["received_by_type"].values()) == after["received"]["bytes"]
     assert after["sent"]["messages"] > before["sent"]["messages"]
+
+
+async def test_a_mission_exports_the_same_bytes_on_another_peer(
+    make_peer: MakePeer, tmp_path: Path
+) -> None:
+    """Issue 15: the same mission gives the same bytes on any peer, in the
+    order and number formatting of the file it was imported from."""
+    a, b = await lookup_swarm(make_peer, 2)
+    await Operations(a).import_map(str(INTEL))
+    loaded = await Operations(b).load_bbox([-100, -100, -10, 100, 100, 10])
+    assert loaded["loaded"]
+
+    await Operations(a).export_map("intel", str(tmp_path / "a.g2o"))
+    await Operations(b).export_map("intel", str(tmp_path / "b.g2o"))
+
+    assert (tmp_path / "b.g2o").read_bytes() == (tmp_path / "a.g2o").read_bytes()
+    assert (tmp_path / "b.g2o").read_bytes() == INTEL.read_bytes()

@@ -81,19 +81,29 @@ class VertexRef(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ...) -> None: ...
 
 class Vertex(_message.Message):
-    __slots__ = ("mission", "index", "pose", "timestamp")
+    __slots__ = ("mission", "index", "pose", "timestamp", "origin")
     MISSION_FIELD_NUMBER: _ClassVar[int]
     INDEX_FIELD_NUMBER: _ClassVar[int]
     POSE_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    ORIGIN_FIELD_NUMBER: _ClassVar[int]
     mission: str
     index: int
     pose: Pose3
     timestamp: float
-    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., pose: _Optional[_Union[Pose3, _Mapping]] = ..., timestamp: _Optional[float] = ...) -> None: ...
+    origin: Origin
+    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., pose: _Optional[_Union[Pose3, _Mapping]] = ..., timestamp: _Optional[float] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ...) -> None: ...
+
+class Origin(_message.Message):
+    __slots__ = ("line", "text")
+    LINE_FIELD_NUMBER: _ClassVar[int]
+    TEXT_FIELD_NUMBER: _ClassVar[int]
+    line: int
+    text: str
+    def __init__(self, line: _Optional[int] = ..., text: _Optional[str] = ...) -> None: ...
 
 class Edge(_message.Message):
-    __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind")
+    __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind", "origin")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Edge.Kind]
@@ -110,13 +120,15 @@ class Edge(_message.Message):
     RELATIVE_FIELD_NUMBER: _ClassVar[int]
     INFORMATION_FIELD_NUMBER: _ClassVar[int]
     KIND_FIELD_NUMBER: _ClassVar[int]
+    ORIGIN_FIELD_NUMBER: _ClassVar[int]
     mission: str
     from_vertex: VertexRef
     to_vertex: VertexRef
     relative: Pose3
     information: _containers.RepeatedScalarFieldContainer[float]
     kind: Edge.Kind
-    def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ...) -> None: ...
+    origin: Origin
+    def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ...) -> None: ...
 
 class Landmark(_message.Message):
     __slots__ = ("mission", "index", "position", "covariance")
