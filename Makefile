@@ -8,8 +8,8 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 DEMO_STAMP := $(VENV)/.installed-demo
 TEST_STAMP := $(VENV)/.installed-test
-# `make check`: the tests without peer processes or swarms, about 70 s on 2 cores
-# (tests/unit/test_makefile.py checks the list).
+# `make check`: the tests without peer processes or swarms (the folders, less the tests
+# marked slow), about a minute on 2 cores (tests/unit/test_makefile.py checks the list).
 CHECK_TESTS := tests/unit tests/property tests/cli
 
 .PHONY: test check demo tour proto lint bench bench-swarm install clean
@@ -40,8 +40,8 @@ test: $(TEST_STAMP)
 	$(PY) -m pytest --durations=10
 
 check: $(TEST_STAMP)
-	@echo "==> running the quick tests ($(CHECK_TESTS)): about 70 s on 2 cores; make test runs them all"
-	$(PY) -m pytest $(CHECK_TESTS) --durations=5
+	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow): about a minute on 2 cores; make test runs them all"
+	$(PY) -m pytest $(CHECK_TESTS) -m "not slow" --durations=5
 
 demo: $(DEMO_STAMP)
 	$(VENV)/bin/mapctl demo

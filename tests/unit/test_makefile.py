@@ -46,7 +46,8 @@ class TestCheck:
         assert all((ROOT / f).is_dir() for f in folders)
         assert not {Path(f).name for f in folders} & SLOW_FOLDERS
         _, recipe = rule("check")
-        assert any("pytest $(CHECK_TESTS)" in line for line in recipe)
+        # the tests that start peer processes stay in `make test` only
+        assert any('pytest $(CHECK_TESTS) -m "not slow"' in line for line in recipe)
 
     def test_every_test_folder_is_in_check_or_known_to_be_slow(self) -> None:
         quick = {Path(f).name for f in variable("CHECK_TESTS").split()}
