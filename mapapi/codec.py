@@ -64,6 +64,8 @@ def commit_record_to_pb(r: CommitRecord) -> core_pb2.CommitRecord:
         author=r.author.to_bytes(),
         message=r.message,
         chunks=[c.to_bytes() for c in r.chunks],
+        author_name=r.author_name,
+        view=r.view,
     )
 
 
@@ -75,6 +77,8 @@ def commit_record_from_pb(m: core_pb2.CommitRecord) -> CommitRecord:
         PeerId.from_bytes(m.author),
         m.message,
         tuple(ChunkId.from_bytes(c) for c in m.chunks),
+        m.author_name,
+        m.view,
     )
 
 

@@ -60,7 +60,7 @@ def _decide(
         return Decision(None, [])
     time = clock.tick()
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
-    record = CommitRecord(CommitId.new(), time, tx.author, message, chunks)
+    record = CommitRecord(CommitId.new(), time, tx.author, message, chunks, tx.author_name, tx.view)
     return Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
 
 

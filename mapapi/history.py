@@ -39,15 +39,46 @@ class Revision:
         return "inserted" if self.insert_time == self.update_time else "updated"
 
 
+# The view a commit comes from unless one is named (`mapctl --view`); a label
+# leaves it out, as git leaves out the default branch.
+DEFAULT_VIEW = "main"
+
+
 @dataclass(frozen=True, slots=True)
 class CommitRecord:
-    """What one commit did: id, logical time, author, message, chunks touched."""
+    """What one commit did: id, logical time, author, message, chunks touched.
+
+    `author_name` is the writer's name (`init --name`) and `view` the view it
+    committed from, both as the writer stamped them; empty in records written
+    before they were kept, and for library transactions outside any view.
+    """
 
     id: CommitId
     time: int
     author: PeerId
     message: str
     chunks: tuple[ChunkId, ...]
+    author_name: str = ""
+    view: str = ""
+
+
+def author_label(record: CommitRecord, known: str = "") -> str:
+    """Who committed, for people: "robot1/bob" (name / view), "robot1" from the
+    main view, or the short id when no name is known.
+
+    Args:
+        known: the author's name as known otherwise (config, member list), for
+            records that carry none.
+    """
+    name = record.author_name or known or record.author.short
+    return f"{name}/{record.view}" if record.view not in ("", DEFAULT_VIEW) else name
+
+
+def number_commits(records: Iterable[CommitRecord]) -> dict[CommitId, int]:
+    """Sequence numbers 1..n in commit order (Lamport time, then id, as `log`
+    sorts): the times themselves jump, since every message ticks the clock."""
+    ordered = sorted(records, key=lambda r: (r.time, r.id))
+    return {r.id: n for n, r in enumerate(ordered, start=1)}
 
 
 def revision_at(revisions: Sequence[Revision], time: int) -> Revision | None:

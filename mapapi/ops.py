@@ -17,8 +17,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from mapapi.errors import ItemNotFound, PeerNotRunning, UsageError
-from mapapi.history import change_kind
-from mapapi.ids import ChunkId, CommitId, ItemId
+from mapapi.history import CommitRecord, change_kind, number_commits
+from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.limits import PEER_ADDRESS
 from mapapi.maps.operations import MapOperations
 from mapapi.transaction import Op
@@ -27,7 +27,7 @@ from mapapi.watch_ops import WatchOperations
 from mapapi.workspace import Workspace
 
 if TYPE_CHECKING:
-    from mapapi.history import CommitRecord, Revision
+    from mapapi.history import Revision
     from mapapi.peer import Peer
     from mapapi.store.base import IdKind
     from mapapi.transaction import Change, Conflict
@@ -86,16 +86,28 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
             "theirs": self._revision(c.theirs),
         }
 
-    @staticmethod
-    def commit_json(record: CommitRecord) -> Json:
-        """A commit record."""
+    def commit_json(self, record: CommitRecord, seq: int | None = None) -> Json:
+        """A commit record; `author` is the writer's id, `author_name` its name
+        (stored with the commit, else known here, else its short id), `view`
+        the view it committed from; `seq` its number in this repository's log."""
         return {
+            **({} if seq is None else {"seq": seq}),
             "commit": record.id,
             "time": record.time,
             "author": record.author,
+            "author_name": record.author_name or self._known_name(record.author),
+            "view": record.view,
             "message": record.message,
             "chunks": list(record.chunks),
         }
+
+    def _known_name(self, peer_id: PeerId) -> str:
+        """A peer's name as this peer knows it (itself, or the member list)."""
+        if peer_id == self.peer.id:
+            return self.peer.name
+        swarm = self.peer.swarm
+        member = swarm.members.get(peer_id) if swarm is not None else None
+        return member.name if member is not None and member.name else peer_id.short
 
     @staticmethod
     def view_json(view: View) -> Json:
@@ -305,27 +317,25 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
     ) -> Json:
         """Commits newest first (of a table), or one item's revisions newest first."""
         peer = self.peer
+        records = peer.log()
+        seq = number_commits(records)  # over the whole log, whatever is shown
         if item is not None and table is not None:
             item_id = ItemId(await self.resolve_id("item", item))
             peer.table(table)
             rows = []
             for revision in reversed(peer.history(item_id)):
                 record = peer.commit_record(revision.commit_id)
-                rows.append(
-                    {
-                        "commit": revision.commit_id,
-                        "time": revision.update_time,
-                        "author": revision.author,
-                        "message": record.message if record else "",
-                        "data": self._revision(revision),
-                    }
-                )
+                if record is None:  # a revision whose record is gone: what it says itself
+                    record = CommitRecord(
+                        revision.commit_id, revision.update_time, revision.author, "", ()
+                    )
+                row = self.commit_json(record, seq.get(record.id))
+                rows.append({**row, "data": self._revision(revision)})
             return rows[:limit] if limit else rows
-        records = peer.log()
         if table is not None:
             chunks = {c.id for c in peer.chunks(table)}
             records = [r for r in records if chunks & set(r.chunks)]
-        return [self.commit_json(r) for r in records[:limit]]
+        return [self.commit_json(r, seq[r.id]) for r in records[:limit]]
 
     async def show(self, commit: str) -> Json:
         """One commit with the revisions it wrote."""
@@ -344,7 +354,8 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
                     "data": self._revision(revision),
                 }
             )
-        return {**self.commit_json(record), "changes": changes}
+        seq = number_commits(self.peer.log())[record.id]
+        return {**self.commit_json(record, seq), "changes": changes}
 
     # -- the swarm (only while the peer daemon runs) ------------------------------------
     def _on_swarm(self) -> Peer:

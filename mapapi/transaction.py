@@ -186,6 +186,10 @@ class TransactionBackend(Protocol):
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply `tx`'s changes; raises ConflictError."""
 
+    @property
+    def name(self) -> str:
+        """The peer's name (`init --name`), stamped on its commits."""
+
 
 class ViewState(Enum):
     """Where a transaction is in its life."""
@@ -219,12 +223,15 @@ class Transaction:
         author: PeerId,
         *,
         isolation: Isolation = "snapshot",
+        view: str = "",
     ) -> None:
         if isolation not in ISOLATIONS:
             raise UsageError(f"isolation must be one of {ISOLATIONS}, not {isolation!r}")
         self._backend = backend
         self.begin_time = begin_time
         self.author = author
+        self.author_name = backend.name
+        self.view = view  # the named view this transaction stands for, if any
         self.isolation: Isolation = isolation
         self.state = ViewState.OPEN
         self._changes: dict[ItemId, Change] = {}
@@ -455,7 +462,9 @@ class Transaction:
 
     def merged(self, error: ConflictError) -> Transaction:
         """See `ConflictError.merge`."""
-        tx = Transaction(self._backend, error.resolved_at, self.author, isolation=self.isolation)
+        tx = Transaction(
+            self._backend, error.resolved_at, self.author, isolation=self.isolation, view=self.view
+        )
         conflicting = {c.item_id for c in error.conflicts}
         for item_id, change in self._changes.items():
             if item_id not in conflicting:

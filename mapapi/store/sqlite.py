@@ -41,13 +41,24 @@ CREATE INDEX IF NOT EXISTS revisions_commit ON revisions (commit_id);
 CREATE INDEX IF NOT EXISTS revisions_time ON revisions (update_time);
 CREATE TABLE IF NOT EXISTS commits (
     id TEXT PRIMARY KEY, time INTEGER NOT NULL, author TEXT NOT NULL,
-    message TEXT NOT NULL, chunks TEXT NOT NULL);
+    message TEXT NOT NULL, chunks TEXT NOT NULL,
+    author_name TEXT NOT NULL DEFAULT '', view TEXT NOT NULL DEFAULT '');
 CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
 CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
 CREATE TABLE IF NOT EXISTS holders (
     chunk_id TEXT NOT NULL REFERENCES chunks(id) ON DELETE CASCADE, peer_id TEXT NOT NULL,
     PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
 """
+
+# Columns added since format 1, with how to add them to an older store (its
+# records then name no author and no view: `log` falls back to other names).
+_ADDED_COLUMNS = {
+    "commits": (
+        ("author_name", "TEXT NOT NULL DEFAULT ''"),
+        ("view", "TEXT NOT NULL DEFAULT ''"),
+    ),
+}
+_COMMIT_COLUMNS = "id, time, author, message, chunks, author_name, view"
 
 _REV_COLUMNS = (
     "item_id, table_name, chunk_id, data, insert_time, update_time, removed, author, commit_id"
@@ -112,7 +123,27 @@ class SqliteStore:
                     "('format', ?), ('version', ?), ('clock', '0')",
                     (FORMAT, str(SCHEMA_VERSION)),
                 )
+        self._add_columns(con)
         check_schema(con, self.path, _SCHEMA, FORMAT, SCHEMA_VERSION)
+
+    def _add_columns(self, con: sqlite3.Connection) -> None:
+        """Bring a store written before `_ADDED_COLUMNS` up to date (idempotent).
+
+        Only a file marked as a mapapi store is touched; `check_schema` then
+        refuses anything else unchanged."""
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if "meta" not in tables:
+            return
+        marker = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
+        if marker is None or marker[0] != FORMAT:
+            return
+        for table, columns in _ADDED_COLUMNS.items():
+            have = {row[1] for row in con.execute(f"PRAGMA table_info({table})")}
+            missing = [(n, t) for n, t in columns if have and n not in have]
+            if missing:
+                with self._write(con):
+                    for name, definition in missing:
+                        con.execute(f"ALTER TABLE {table} ADD COLUMN {name} {definition}")
 
     def _con(self) -> sqlite3.Connection:
         con: sqlite3.Connection | None = getattr(self._local, "con", None)
@@ -291,8 +322,16 @@ class SqliteStore:
             # Idempotent and additive: a commit that spans chunks reaches a holder
             # as one batch per chunk, each applied on its own.
             con.execute(
-                "INSERT OR IGNORE INTO commits VALUES (?, ?, ?, ?, ?)",
-                (record.id, record.time, record.author, record.message, ",".join(record.chunks)),
+                f"INSERT OR IGNORE INTO commits ({_COMMIT_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (
+                    record.id,
+                    record.time,
+                    record.author,
+                    record.message,
+                    ",".join(record.chunks),
+                    record.author_name,
+                    record.view,
+                ),
             )
             # In primary-key order: random ids inserted as they come touch pages all
             # over the table's B-tree; sorted, a large commit writes in half the time.
@@ -344,7 +383,7 @@ class SqliteStore:
         )
 
     def _record(self, row: tuple) -> CommitRecord:
-        cid, time, author, message, chunks = row
+        cid, time, author, message, chunks, author_name, view = row
         try:
             return CommitRecord(
                 CommitId(cid),
@@ -352,6 +391,8 @@ class SqliteStore:
                 PeerId(author),
                 message,
                 tuple(ChunkId(c) for c in chunks.split(",") if c),
+                author_name,
+                view,
             )
         except (AttributeError, TypeError, ValueError) as exc:
             raise self._damaged_row("commit record", exc) from exc
@@ -359,8 +400,7 @@ class SqliteStore:
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
         """Newest first."""
         rows = self._con().execute(
-            "SELECT id, time, author, message, chunks FROM commits "
-            "ORDER BY time DESC, id DESC LIMIT ?",
+            f"SELECT {_COMMIT_COLUMNS} FROM commits ORDER BY time DESC, id DESC LIMIT ?",
             (-1 if limit is None else limit,),
         )
         return [self._record(r) for r in rows]
@@ -369,9 +409,7 @@ class SqliteStore:
         """One record."""
         row = (
             self._con()
-            .execute(
-                "SELECT id, time, author, message, chunks FROM commits WHERE id = ?", (commit_id,)
-            )
+            .execute(f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id = ?", (commit_id,))
             .fetchone()
         )
         return None if row is None else self._record(row)
@@ -457,7 +495,7 @@ class SqliteStore:
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """The records of every commit that wrote to a chunk, oldest first."""
         rows = self._con().execute(
-            "SELECT id, time, author, message, chunks FROM commits WHERE id IN "
+            f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id IN "
             "(SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?) ORDER BY time",
             (chunk_id,),
         )

@@ -10,9 +10,20 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 
-def _cell(key: str, value: Any) -> Any:
-    """How a log column reads for humans: short ids, JSON data, chunk counts."""
-    if key in ("commit", "author"):
+def _author(row: dict[str, Any], verbose: bool) -> str:
+    """Who committed, for people: "robot1/bob" (name / view; the main view is
+    left out), with the short id after it under `-v`."""
+    view = row.get("view", "")
+    name = f"{row['author_name']}/{view}" if view not in ("", "main") else row["author_name"]
+    return f"{name} ({row['author'][:8]})" if verbose else name
+
+
+def _cell(key: str, row: dict[str, Any], verbose: bool) -> Any:
+    """How a log column reads for humans: names, short ids, JSON data, chunk counts."""
+    value = row.get(key)
+    if key == "author":
+        return _author(row, verbose)
+    if key == "commit":
         return value[:8]
     if key == "data":
         return json.dumps(value)
@@ -30,7 +41,10 @@ def _cell(key: str, value: Any) -> Any:
 def log(
     session: Session, table_name: str | None, item: str | None, limit: int | None, as_json: bool
 ) -> None:
-    """Show commits (newest first), those touching TABLE, or one item's revisions."""
+    """Show commits (newest first), those touching TABLE, or one item's revisions.
+
+    `#` numbers the commits 1..n in commit order; authors show by name, as
+    NAME/VIEW for a commit from a named view (ids with -v and in --json)."""
     from mapctl import render
 
     rows = session.call("log", table=table_name, item=item, limit=limit)
@@ -38,8 +52,11 @@ def log(
         render.emit_json(rows)
         return
     last = "data" if item is not None else "chunks"
-    columns = ["commit", "time", "author", "message", last]
-    render.table("log", columns, [[_cell(k, r[k]) for k in columns] for r in rows])
+    # `seq` numbers commits 1..n in order; `time` is Lamport time, which jumps
+    # (docs/guide/history.md, "Logical time").
+    columns = ["seq", "commit", "time", "author", "message", last]
+    cells = [[_cell(k, r, session.verbose) for k in columns] for r in rows]
+    render.table("log", ["#", *columns[1:]], cells)
 
 
 @click.command("show")
@@ -54,7 +71,9 @@ def show(session: Session, commit_ref: str, as_json: bool) -> None:
     if as_json:
         render.emit_json(info)
         return
-    render.line(f"commit {info['commit']}  time {info['time']}  author {info['author']}", "bold")
+    author = _author(info, session.verbose)
+    head = f"commit {info['commit']}  #{info['seq']}  time {info['time']}  author {author}"
+    render.line(head, "bold")
     render.line(f"    {info['message'] or '(no message)'}")
     render.table(
         "changes",

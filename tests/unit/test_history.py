@@ -3,10 +3,13 @@
 import pytest
 
 from mapapi.history import (
+    CommitRecord,
     ItemHistory,
     Revision,
+    author_label,
     change_kind,
     changed_between,
+    number_commits,
     revision_at,
     visible_at,
 )
@@ -110,3 +113,37 @@ class TestItemHistory:
         history.add(LIFE[1])
         assert snapshot == (LIFE[0],)
         assert isinstance(snapshot, tuple)
+
+
+def record(time: int, *, name: str = "", view: str = "") -> CommitRecord:
+    return CommitRecord(CommitId.new(), time, AUTHOR, "", (CHUNK,), name, view)
+
+
+class TestAuthorLabel:
+    def test_name_and_view(self) -> None:
+        assert author_label(record(1, name="robot1", view="bob")) == "robot1/bob"
+
+    def test_the_main_view_is_not_repeated(self) -> None:
+        assert author_label(record(1, name="robot1", view="main")) == "robot1"
+        assert author_label(record(1, name="robot1")) == "robot1"
+
+    def test_an_old_record_takes_the_known_name_then_the_short_id(self) -> None:
+        assert author_label(record(1), known="robot2") == "robot2"
+        assert author_label(record(1)) == AUTHOR.short
+
+    def test_the_stored_name_wins_over_the_known_one(self) -> None:
+        assert author_label(record(1, name="robot1"), known="renamed") == "robot1"
+
+
+class TestNumberCommits:
+    def test_numbers_run_1_to_n_in_commit_order(self) -> None:
+        records = [record(725), record(97), record(193)]
+        numbers = number_commits(records)
+        assert [numbers[r.id] for r in records] == [3, 1, 2]
+
+    def test_equal_times_are_ordered_by_id(self) -> None:
+        a, b = sorted([record(5), record(5)], key=lambda r: r.id)
+        assert number_commits([b, a]) == {a.id: 1, b.id: 2}
+
+    def test_no_commits(self) -> None:
+        assert number_commits([]) == {}

@@ -30,18 +30,22 @@ class Revision(_message.Message):
     def __init__(self, item_id: _Optional[bytes] = ..., table: _Optional[str] = ..., chunk_id: _Optional[bytes] = ..., data: _Optional[bytes] = ..., insert_time: _Optional[int] = ..., update_time: _Optional[int] = ..., removed: _Optional[bool] = ..., author: _Optional[bytes] = ..., commit_id: _Optional[bytes] = ...) -> None: ...
 
 class CommitRecord(_message.Message):
-    __slots__ = ("id", "time", "author", "message", "chunks")
+    __slots__ = ("id", "time", "author", "message", "chunks", "author_name", "view")
     ID_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
     AUTHOR_FIELD_NUMBER: _ClassVar[int]
     MESSAGE_FIELD_NUMBER: _ClassVar[int]
     CHUNKS_FIELD_NUMBER: _ClassVar[int]
+    AUTHOR_NAME_FIELD_NUMBER: _ClassVar[int]
+    VIEW_FIELD_NUMBER: _ClassVar[int]
     id: bytes
     time: int
     author: bytes
     message: str
     chunks: _containers.RepeatedScalarFieldContainer[bytes]
-    def __init__(self, id: _Optional[bytes] = ..., time: _Optional[int] = ..., author: _Optional[bytes] = ..., message: _Optional[str] = ..., chunks: _Optional[_Iterable[bytes]] = ...) -> None: ...
+    author_name: str
+    view: str
+    def __init__(self, id: _Optional[bytes] = ..., time: _Optional[int] = ..., author: _Optional[bytes] = ..., message: _Optional[str] = ..., chunks: _Optional[_Iterable[bytes]] = ..., author_name: _Optional[str] = ..., view: _Optional[str] = ...) -> None: ...
 
 class TableDescriptor(_message.Message):
     __slots__ = ("name", "type_name")
