@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from mapctl.cli import cli
 from mapctl.completion import attach
-from tests.cli.conftest import STRUCT, Mapctl
+from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl
 
 INTEL = Path(__file__).resolve().parents[2] / "sample_maps" / "pose_graphs" / "intel.g2o"
 
@@ -83,6 +83,11 @@ class TestRepositoryWords:
     ) -> None:
         monkeypatch.chdir(Path(filled["repo"]))
         assert complete("get", "po") == ["poses"]
+
+    async def test_while_the_peer_daemon_runs(self, daemon: InProcessDaemon) -> None:
+        # the daemon holds the store open; completion reads it beside the daemon
+        assert (await daemon("table", "create", "poses", "--type", STRUCT)).code == 0
+        assert complete("-C", str(daemon.repo), "ls", "po") == ["poses"]
 
     def test_zsh_gets_help_text(self, filled: dict[str, str]) -> None:
         lines = complete("-C", filled["repo"], "show", filled["commit"][:6], shell="zsh")
