@@ -87,7 +87,9 @@ class Workspace:
     # -- reads and staging -----------------------------------------------------
     def transaction(self, view: View) -> Transaction:
         """A live transaction equivalent to the view."""
-        tx = Transaction(self.peer, view.begin_time, self.peer.id, isolation=view.isolation)
+        tx = Transaction(
+            self.peer, view.begin_time, self.peer.id, isolation=view.isolation, view=view.name
+        )
         for change in view.changes:
             tx.stage(change)
         tx.note_reads(view.read_set, view.scopes)

@@ -7,7 +7,6 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-import pytest
 from google.protobuf import struct_pb2
 
 from mapapi import ItemId, Peer, UsageError
@@ -184,10 +183,6 @@ class TestLogNamesAndOrder:
         assert [c["seq"] for c in points.json("log", "-n", "1")] == [3]
         assert points.json("show", points.json("log")[-1]["commit"])["seq"] == 1
 
-    @pytest.mark.xfail(
-        strict=True,
-        reason="mapapi/workspace.py must pass view=view.name to Transaction (owned elsewhere)",
-    )
     def test_a_named_view_shows_in_the_author(self, points: Mapctl) -> None:
         points.insert({"v": 1}, view="bob")
         points.commit("from bob", view="bob")
