@@ -32,6 +32,7 @@ from mapapi.transaction import (
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
     from collections.abc import Awaitable, Callable, Sequence
 
+    from mapapi.commit_check import CommitRule
     from mapapi.lock_client import Held, LockService
     from mapapi.replication import Replicator
 
@@ -45,17 +46,25 @@ class Decision:
 
 
 def _decide(
-    store: Store, tx: Transaction, message: str, clock: LamportClock, try_merge: MergeFn | None
+    store: Store,
+    tx: Transaction,
+    message: str,
+    clock: LamportClock,
+    try_merge: MergeFn | None,
+    rules: Sequence[CommitRule] = (),
 ) -> Decision:
     """Validate `tx` on the current replica and stamp its revisions (no writes).
 
     Raises:
         ConflictError: with (base, ours, theirs) for every conflicting item.
+        UsageError: a rule refuses the accepted changes.
     """
     accepted, latest, conflicts = _validate(store, tx, try_merge)
     clock.advance_to(store.clock())
     if conflicts:
         raise ConflictError(conflicts, tx, resolved_at=store.clock())
+    for rule in rules:
+        rule.check(store, accepted)
     if not accepted:
         return Decision(None, [])
     time = clock.tick()
@@ -114,8 +123,9 @@ def commit_locally(
     message: str,
     clock: LamportClock,
     try_merge: MergeFn | None,
+    rules: Sequence[CommitRule] = (),
 ) -> Decision:
-    """Commit `tx` against `store` atomically (no swarm).
+    """Commit `tx` against `store` atomically (no swarm), if `rules` accept it.
 
     Returns:
         The commit record (None when nothing was written) with the revisions
@@ -125,7 +135,7 @@ def commit_locally(
         ConflictError: with (base, ours, theirs) for every conflicting item.
     """
     with store.exclusive():
-        decision = _decide(store, tx, message, clock, try_merge)
+        decision = _decide(store, tx, message, clock, try_merge, rules)
         if decision.record is not None:
             store.apply_commit(decision.record, decision.revisions)
     tx.committed(decision.revisions)
@@ -175,6 +185,7 @@ async def commit_distributed(
     clock: LamportClock,
     try_merge: MergeFn | None,
     after: Callable[[CommitRecord, list[Revision]], Awaitable[None]] | None = None,
+    rules: Sequence[CommitRule] = (),
 ) -> CommitRecord | None:
     """Commit `tx` across every holder of the chunks it touches; `after` runs once
     the commit is applied everywhere, while this peer still holds its own locks
@@ -194,7 +205,7 @@ async def commit_distributed(
     try:
         for chunk in _chunks_to_lock(store, tx):
             held.append(await replicator.lock(chunk, lambda: _precheck(store, tx, try_merge)))
-        decision = _decide(store, tx, message, clock, try_merge)
+        decision = _decide(store, tx, message, clock, try_merge, rules)
         record = decision.record
         if record is not None:
             try:

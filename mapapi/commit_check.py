@@ -12,13 +12,15 @@ removal). An item of another chunk may not be written through this one.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Protocol
 
 from mapapi import limits
 from mapapi.errors import UsageError
 from mapapi.history import CommitRecord, Revision
 from mapapi.ids import ChunkId, PeerId
-from mapapi.store.base import ReplicaStore
+from mapapi.store.base import ReplicaStore, Store
 from mapapi.table import TableDescriptor
+from mapapi.transaction import Change
 
 
 def check_batch(
@@ -99,3 +101,15 @@ def _descriptor(store: ReplicaStore, table: str) -> TableDescriptor | None:
         return TableDescriptor.named(table, store.tables()[table])
     except UsageError:
         return None
+
+
+class CommitRule(Protocol):
+    """An invariant an application layer keeps over its tables, given to `Peer`
+    at construction and checked by the writer on every commit, on the current
+    replica while it holds the chunks' locks (DESIGN §5 step 4), so it holds
+    whoever commits: a CLI, a script or an import.
+    """
+
+    def check(self, store: Store, changes: Sequence[Change]) -> None:
+        """Refuse `changes` (the accepted write set) by raising a `UsageError`;
+        cost should follow the size of `changes`, not of the tables."""

@@ -30,8 +30,11 @@ from mapapi.transaction import Change, Isolation, Transaction
 from mapapi.triggers import Callback, Triggers
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from google.protobuf.message import Message
 
+    from mapapi.commit_check import CommitRule
     from mapapi.liveness import LivenessOptions
     from mapapi.membership import MemberState
     from mapapi.merge import MergePolicy
@@ -55,8 +58,22 @@ class PlacedChunk:
     held: bool
 
 
+def _standard_rules() -> tuple[CommitRule, ...]:
+    """The rules of the tables mapapi ships, the map tables' (a vertex index is
+    unique in its mission, an edge's ends exist). Imported here, not at the top:
+    the application layer sits above the peer and gives them at construction."""
+    from mapapi.maps.rules import map_rules
+
+    return map_rules()
+
+
 class Peer:
-    """One peer and its local map repository."""
+    """One peer and its local map repository.
+
+    Args:
+        rules: what every commit of this peer must keep (`CommitRule`); by
+            default the map tables' rules, `()` for none.
+    """
 
     def __init__(
         self,
@@ -66,8 +83,11 @@ class Peer:
         name: str = "",
         grid: SpatialGrid | None = None,
         security: Security | None = None,
+        rules: Sequence[CommitRule] | None = None,
     ) -> None:
         self.store = store
+        # checked by every commit this peer writes; by default the map tables' rules
+        self.rules = tuple(_standard_rules() if rules is None else rules)
         self.security = security
         self.id = peer_id or PeerId.new()
         self.name = name or self.id.short
@@ -408,9 +428,10 @@ class Peer:
                 self.clock,
                 self._try_merge,
                 after=self._committed,
+                rules=self.rules,
             )
         self._refuse_shared(tx)
-        done = commit_locally(self.store, tx, message, self.clock, self._try_merge)
+        done = commit_locally(self.store, tx, message, self.clock, self._try_merge, self.rules)
         if done.record is not None:
             await self._committed(done.record, done.revisions)
         return done.record

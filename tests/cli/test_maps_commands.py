@@ -230,3 +230,18 @@ class TestThroughTheDaemon:
         assert (tmp_path / "intel-out.g2o").read_text().startswith("VERTEX_SE2 0 ")
         assert drawn["path"] == str(tmp_path / "intel.png")
         assert (tmp_path / "intel.png").read_bytes().startswith(PNG)
+
+
+class TestMissionRules:
+    def test_a_second_vertex_100_set_by_hand_exits_2_naming_both(self, intel: Mapctl) -> None:
+        """Issue 15: `set` stages it; the commit refuses it and writes nothing."""
+        chunk = intel.json("missions")["missions"][0]["chunks"]["vertices"]
+        bogus = '{"mission": "intel", "index": 100, "pose": {"x": 9.0, "qw": 1.0}}'
+        added = intel.json("set", "vertices", bogus, "--chunk", chunk)["id"]
+
+        outcome = intel.main("commit", "-m", "a bogus pose")
+
+        assert outcome.code == EXIT_USAGE
+        assert "mission 'intel' would have vertex 100 twice" in outcome.err
+        assert added in outcome.err
+        assert intel.json("missions")["missions"][0]["vertices"] == 1_728
