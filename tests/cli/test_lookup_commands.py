@@ -121,8 +121,8 @@ class TestQueryBbox:
     def test_a_chunk_of_vertices_lists_its_missions(self, mapctl: Mapctl) -> None:
         mapctl("table", "create", "vertices", "--type", "mapapi.v1.Vertex")
         chunk = mapctl("chunk", "create", "vertices").strip()
-        for mission, x in (("hall", 1.0), ("lab", 2.0), ("hall", 3.0)):
-            vertex = {"mission": mission, "index": 0, "pose": {"x": x, "qw": 1}}
+        for index, (mission, x) in enumerate((("hall", 1.0), ("lab", 2.0), ("hall", 3.0))):
+            vertex = {"mission": mission, "index": index, "pose": {"x": x, "qw": 1}}
             mapctl("set", "vertices", json.dumps(vertex))
         mapctl("set", "vertices", json.dumps({"index": 9, "pose": {"x": 2.5}}))  # no mission
         mapctl.commit("vertices of two missions")
