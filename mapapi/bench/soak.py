@@ -241,7 +241,7 @@ class Soak:
     async def _stage(self, node: Node, view: str) -> None:
         item = self.items["counter"]
         got = await node.call("get", view=view, table=COUNTER, item=item)
-        value = int(got["data"].get("value", 0)) + 1  # an int64 is a JSON string
+        value = got["data"]["value"] + 1
         data = json.dumps({"name": "c", "value": value})
         await node.call("set", view=view, table=COUNTER, data=data, item=item)
 

@@ -112,8 +112,13 @@ def _draw(
     title: str | None,
     labels: Mapping[str, str],
 ) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise UsageError(
+            "plots need matplotlib; install it with `pip install 'mapapi[plot]'`"
+        ) from None
 
     figure = Figure(figsize=(9, 8), dpi=120)
     FigureCanvasAgg(figure)

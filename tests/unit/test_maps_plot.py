@@ -4,6 +4,7 @@ graphs and clouds, and the fall back to matplotlib where open3d cannot render.""
 from __future__ import annotations
 
 import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +61,14 @@ class TestPlot:
         drawn = plot_map(out, [read_g2o(SAMPLES / "pose_graphs" / "intel.g2o")], [cloud()])
         assert (drawn.renderer, drawn.up, drawn.missions) == ("matplotlib", "z", ["intel", "scan"])
         assert out.read_bytes().startswith(PNG)
+
+    def test_without_matplotlib_the_error_says_what_to_install(
+        self, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    ) -> None:
+        monkeypatch.setitem(sys.modules, "matplotlib.figure", None)  # import raises ImportError
+        graph = read_g2o(SAMPLES / "pose_graphs" / "intel.g2o")
+        with pytest.raises(UsageError, match=r"pip install 'mapapi\[plot\]'"):
+            plot_map(tmp_path / "x.png", [graph])
 
     def test_nothing_to_draw_is_a_usage_error(self, tmp_path: Path) -> None:
         with pytest.raises(UsageError, match="nothing to plot"):
