@@ -121,4 +121,4 @@ def test_a_writer_killed_mid_commit_holds_nothing_up_and_loses_nothing(
     mapctl(w.repo, "set", "counters", item, '{"name": "c", "value": 3}')
     mapctl(w.repo, "commit", "-m", "c = 3")
     assert history(a.repo) == history(b.repo) == history(w.repo)
-    assert json.loads(mapctl(b.repo, "get", "counters", item, "--json"))["value"] == "3"
+    assert json.loads(mapctl(b.repo, "get", "counters", item, "--json"))["value"] == 3
