@@ -413,7 +413,18 @@ def stop_daemon(repo: Repository, timeout: float = STOP_TIMEOUT) -> PeerRecord |
                 f"the peer (pid {record.pid}) did not stop within {2 * timeout:g} s; "
                 f"`kill -9 {record.pid}` ends it (its pid file is then stale and ignored)"
             )
+    _reap(record.pid, timeout)
     return record
+
+
+def _reap(pid: int, timeout: float) -> None:
+    """Wait for the exit of daemon `pid` if this process started it: it let go of
+    its lock and is exiting; reaped, it is neither a zombie nor, at this process's
+    exit, a "subprocess still running" warning."""
+    for proc in [p for p in _DETACHED if p.pid == pid]:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(timeout)
+            _DETACHED.remove(proc)
 
 
 def _call(record: PeerRecord, repo: Repository, op: str) -> object:
