@@ -306,12 +306,13 @@ class RaftNode:
     def _become_leader(self) -> None:
         self._reset(self.term)
         self.role, self.leader = Role.LEADER, self.id
-        for node in self.config.members:
-            self._progress[node] = Progress(next=self.log.last_index + 1, recent_active=True)
-        self._progress.setdefault(self.id, Progress())
-        # No membership change until everything before this term has committed (thesis §4.1).
-        self._pending_conf_index = self.log.last_index
-        # An entry of our own term lets us commit the earlier ones (paper §5.4.2, thesis §6.4).
+        for node in self.config.members | {self.id}:
+            self._progress[node] = Progress(
+                next=self.log.last_index + 1, recent_active=node == self.id
+            )
+        # An entry of our own term lets us commit the earlier ones (paper §5.4.2, thesis §6.4);
+        # no membership change until it commits (the single-server fix, thesis §4.1 errata).
+        self._pending_conf_index = self.log.last_index + 1
         self._append([Entry(self.term, self.log.last_index + 1, EntryKind.NOOP)])
         log.debug("node %d leads term %d", self.id, self.term)
 
