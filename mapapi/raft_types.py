@@ -14,6 +14,19 @@ NONE = 0
 """The id of no node: an empty vote, an unknown leader."""
 
 
+@dataclass(frozen=True, slots=True)
+class RaftOptions:
+    """Tunables, in ticks and counts (etcd's defaults: heartbeat 1, election 10)."""
+
+    election_tick: int = 10
+    heartbeat_tick: int = 1
+    pre_vote: bool = True
+    check_quorum: bool = True
+    max_inflight: int = 64  # appends in flight per follower (pipelining, thesis §10.2.2)
+    max_entries_per_msg: int = 256  # batching
+    max_bytes_per_msg: int = 1 << 20
+
+
 class RaftError(Exception):
     """Base for the refusals of a Raft node; the shell maps them onto `MapError`s."""
 
