@@ -97,6 +97,13 @@ def test_removed_leader_that_lost_its_quorum_may_campaign_again() -> None:
     run_seed(82)
 
 
+def test_leader_of_an_old_term_elected_late_is_not_a_completeness_violation() -> None:
+    """Seeds 708 and 2118 (checker bug): delayed votes made a node leader of term 2 after a
+    term-3 entry was applied; Leader Completeness only binds leaders of later terms."""
+    run_seed(708)
+    run_seed(2118)
+
+
 def test_slow_world_recovers_within_the_liveness_bound() -> None:
     """Seed 21: delays of 4 ticks and deferred Readys; heals within 100 ticks."""
     sim = run_seed(21)
