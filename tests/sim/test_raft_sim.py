@@ -1,6 +1,6 @@
 """Seeded simulations of a Raft group under faults (DESIGN §13); see `tests.sim.simulator`.
 
-A failing seed names the command that replays it: `SIM_SEED=<n> pytest tests/sim -k replay`.
+A failing seed names the command that replays it alone: `SIM_SEED=<n> pytest tests/sim -k seed -s`.
 """
 
 from __future__ import annotations
@@ -24,25 +24,23 @@ def run_seed(seed: int, **kwargs: object) -> Sim:
         trace = "\n".join(sim.trace[-15:])
         pytest.fail(
             f"{err}\n{sim.summary()}\nlast faults:\n{trace}\n"
-            f"replay: SIM_SEED={seed} pytest tests/sim -k replay",
+            f"replay: SIM_SEED={seed} pytest tests/sim -k seed -s",
             pytrace=False,
         )
     return sim
 
 
-@pytest.mark.parametrize("seed", range(int(os.environ.get("SIM_SEEDS", SEEDS))))
+def _seeds() -> list[int]:
+    """The seeds to run: SIM_SEED alone (a replay), else the first SIM_SEEDS (or SEEDS)."""
+    if "SIM_SEED" in os.environ:
+        return [int(os.environ["SIM_SEED"])]
+    return list(range(int(os.environ.get("SIM_SEEDS", SEEDS))))
+
+
+@pytest.mark.parametrize("seed", _seeds())
 def test_seed(seed: int) -> None:
     """Every invariant holds through this seed's faults, and the group recovers after them."""
-    run_seed(seed)
-
-
-def test_replay() -> None:
-    """Replay the seed in SIM_SEED (printed by a failing `test_seed`)."""
-    seed = os.environ.get("SIM_SEED")
-    if seed is None:
-        pytest.skip("set SIM_SEED=<n> to replay a seed")
-    sim = run_seed(int(seed))
-    print(sim.summary())  # shown with -s
+    print(run_seed(seed).summary())  # shown with -s, e.g. when replaying one seed
 
 
 def test_same_seed_same_run() -> None:
