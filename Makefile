@@ -10,7 +10,7 @@ DEMO_STAMP := $(VENV)/.installed-demo
 TEST_STAMP := $(VENV)/.installed-test
 # `make check`: the tests without peer processes or swarms (the folders, less the tests
 # marked slow), about a minute on 2 cores (tests/unit/test_makefile.py checks the list).
-CHECK_TESTS := tests/unit tests/property tests/cli
+CHECK_TESTS := tests/unit tests/property tests/cli tests/sim
 
 .PHONY: test check demo tour proto lint bench bench-swarm install clean
 
@@ -19,7 +19,7 @@ $(PY):
 	@$(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install --quiet --upgrade pip
 
-# What `mapctl demo` imports (mapctl/commands/demo.py, mapapi/demo/): the core
+# What `mapctl demo` imports (mapctl/commands/demo.py, mapbench/demo/): the core
 # dependencies, and matplotlib for the two PNGs it draws.
 $(DEMO_STAMP): pyproject.toml | $(PY)
 	@echo "==> installing mapapi and what the demo needs into $(VENV): click, rich, pyzmq, protobuf, numpy, and matplotlib (the 'plot' extra) for its PNGs"
@@ -40,8 +40,8 @@ test: $(TEST_STAMP)
 	$(PY) -m pytest --durations=10
 
 check: $(TEST_STAMP)
-	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow): about a minute on 2 cores; make test runs them all"
-	$(PY) -m pytest $(CHECK_TESTS) -m "not slow" --durations=5
+	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow; 100 simulator seeds of make test's 600): about a minute on 2 cores; make test runs them all"
+	SIM_SEEDS=100 $(PY) -m pytest $(CHECK_TESTS) -m "not slow" --durations=5
 
 demo: $(DEMO_STAMP)
 	$(VENV)/bin/mapctl demo
@@ -53,9 +53,9 @@ proto: $(TEST_STAMP)
 	bash scripts/gen-proto.sh mapapi/_pb
 
 lint: $(TEST_STAMP)
-	$(VENV)/bin/ruff check mapapi mapctl tests
-	$(VENV)/bin/ruff format --check mapapi mapctl tests
-	$(VENV)/bin/mypy mapapi mapctl
+	$(VENV)/bin/ruff check mapapi mapctl mapbench tests
+	$(VENV)/bin/ruff format --check mapapi mapctl mapbench tests
+	$(VENV)/bin/mypy mapapi mapctl mapbench
 
 bench: $(TEST_STAMP)
 	$(VENV)/bin/mapctl bench local

@@ -4,7 +4,7 @@ The public API: `Peer` (async facade), `Transaction`, value types and errors.
 `mapapi.sync` wraps `Peer` for blocking scripts.
 """
 
-from mapapi.errors import (
+from mapapi.core.errors import (
     AlreadyInitialisedError,
     ChunkError,
     ChunkNotFound,
@@ -24,13 +24,13 @@ from mapapi.errors import (
     UsageError,
     ViewClosedError,
 )
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.peer import Peer
-from mapapi.repo import Repository
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.table import TableDescriptor
+from mapapi.core.transaction import Change, Conflict, Op, Transaction
+from mapapi.service.peer import Peer
+from mapapi.service.repo import Repository
 from mapapi.store import ChunkInfo
-from mapapi.table import TableDescriptor
-from mapapi.transaction import Change, Conflict, Op, Transaction
 
 __all__ = [
     "AlreadyInitialisedError",

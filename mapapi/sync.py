@@ -16,9 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mapapi.errors import ConflictError
-from mapapi.peer import Peer
-from mapapi.transaction import Transaction
+from mapapi.core.errors import ConflictError
+from mapapi.core.transaction import Transaction
+from mapapi.service.peer import Peer
 
 _WRAPPED = (Peer, Transaction)
 

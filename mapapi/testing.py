@@ -14,9 +14,9 @@ from typing import Any
 
 import pytest
 
-from mapapi.peer import Peer
-from mapapi.repo import Repository
-from mapapi.spatial import SpatialGrid
+from mapapi.lookup.spatial import SpatialGrid
+from mapapi.service.peer import Peer
+from mapapi.service.repo import Repository
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, interval: float = 0.01) -> None:

@@ -64,7 +64,7 @@ def main() -> None:
         click.echo("interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
     except Exception as exc:
-        from mapapi.errors import MapError
+        from mapapi.core.errors import MapError
 
         if verbose:
             traceback.print_exc()

@@ -11,7 +11,7 @@ import click
 if TYPE_CHECKING:
     import asyncio
 
-    from mapapi.peer import Peer
+    from mapapi.service.peer import Peer
 
 T = TypeVar("T")
 
@@ -20,7 +20,7 @@ Progress = Callable[[Any], None]  # gets each answer of a progress operation
 
 
 class Ops(Protocol):
-    """`mapapi.ops.Operations`, or `mapapi.control.RemoteOperations` in a daemon."""
+    """`mapapi.service.ops.Operations`, or `mapapi.service.control.RemoteOperations` in a daemon."""
 
     async def call(self, op: str, args: dict[str, Any]) -> Any:
         """Run one operation; its JSON result."""
@@ -29,7 +29,7 @@ class Ops(Protocol):
 class Session:
     """Opens the repository lazily and closes it when the command ends.
 
-    Commands call `call(op, **args)`: one JSON operation of `mapapi.ops`. While
+    Commands call `call(op, **args)`: one JSON operation of `mapapi.service.ops`. While
     a peer daemon runs on the repository (`mapctl peer start`), every operation
     goes to it over its control endpoint; otherwise it runs on the repository's
     embedded peer in this process (DESIGN §9).
@@ -47,17 +47,17 @@ class Session:
     def ops(self) -> Ops:
         """The operations: the running daemon's, else the embedded peer's (on first use)."""
         if self._ops is None:
-            from mapapi.repo import Repository
+            from mapapi.service.repo import Repository
 
             repo = Repository.find(self.path)
             record = repo.running_peer()
             if record is not None:
-                from mapapi.control import RemoteOperations
+                from mapapi.service.control import RemoteOperations
 
                 self._ops = RemoteOperations.of(repo, record, alive=repo.peer_locked)
             else:
-                from mapapi.ops import Operations
-                from mapapi.peer import Peer
+                from mapapi.service.ops import Operations
+                from mapapi.service.peer import Peer
 
                 self._peer = Peer.of(repo)
                 self._ops = Operations(self._peer)

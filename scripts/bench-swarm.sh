@@ -19,7 +19,7 @@ OUT=${OUT:-docs/img}
 mkdir -p "$OUT"
 
 echo "== transport round trip" >&2
-"$PY" -m mapapi.net.bench -n 10000 --json > "$OUT/swarm-roundtrip.json"
+"$PY" -m mapbench.net -n 10000 --json > "$OUT/swarm-roundtrip.json"
 cat "$OUT/swarm-roundtrip.json" >&2
 
 : > "$OUT/swarm-viewtest.jsonl"

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.schema import PointCloudBlock, box_to_pb
-from mapapi.spatial import BBox
 
 Points = npt.NDArray[np.float32]  # shape (n, 3)
 

@@ -17,7 +17,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 from mapapi.maps.cloud import PointCloud, Points, as_points
 from mapapi.maps.errors import MapImportError
 

@@ -1,9 +1,9 @@
-"""The error the map importers raise (kept here, not in `mapapi.errors`: the core
+"""The error the map importers raise (kept here, not in `mapapi.core.errors`: the core
 knows nothing about missions, DESIGN §2)."""
 
 from __future__ import annotations
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 
 
 class MapImportError(UsageError):

@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TextIO
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import (
     NO_ORIGIN,

@@ -12,9 +12,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.se3 import IDENTITY, Pose, compose
-from mapapi.spatial import BBox
 
 log = logging.getLogger(__name__)
 

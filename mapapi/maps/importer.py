@@ -16,7 +16,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from mapapi.ids import ChunkId, CommitId
+from mapapi.core.ids import ChunkId, CommitId
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud, cloud_blocks
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import NO_ORIGIN, GraphEdge, MissionGraph
@@ -33,13 +34,12 @@ from mapapi.maps.schema import (
     vertex_to_pb,
 )
 from mapapi.maps.stored import mission_names, reading
-from mapapi.spatial import BBox
 
 if TYPE_CHECKING:
     from google.protobuf.message import Message
 
-    from mapapi.peer import Peer
-    from mapapi.transaction import Transaction
+    from mapapi.core.transaction import Transaction
+    from mapapi.service.peer import Peer
 
 log = logging.getLogger(__name__)
 

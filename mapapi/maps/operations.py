@@ -1,6 +1,6 @@
 """The map operations of `mapctl` (import, export, missions, plot), JSON in and out.
 
-`MapOperations` is a mixin of `mapapi.ops.Operations`, so these run in the
+`MapOperations` is a mixin of `mapapi.service.ops.Operations`, so these run in the
 peer daemon when one runs, like every other operation. File paths are the
 caller's; `mapctl` sends them absolute, since the daemon's working folder is
 not the caller's. Reading files and drawing run in a worker thread, so the peer
@@ -18,19 +18,19 @@ from functools import cached_property, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mapapi.errors import UsageError
-from mapapi.ids import PeerId
+from mapapi.core.errors import UsageError
+from mapapi.core.ids import PeerId
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.schema import MISSIONS
-from mapapi.spatial import BBox
 
 if TYPE_CHECKING:
     from mapapi.maps.cloud import PointCloud
     from mapapi.maps.importer import ImportResult
     from mapapi.maps.stored import MissionInfo
     from mapapi.net.messages import Member
-    from mapapi.peer import Peer
+    from mapapi.service.peer import Peer
 
 Json = Any
 

@@ -18,14 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.graph import EdgeKind, MissionGraph
-from mapapi.spatial import BBox
+from mapapi.maps.view_axes import AXES, choose_up, plane_axes
 
 log = logging.getLogger(__name__)
 
-AXES = "xyz"
 MAX_SCATTER = 200_000  # points drawn per picture: more only blurs and slows
 _SEED = 7  # the subsample of a large cloud is the same on every run
 _PALETTE = [f"C{i}" for i in range(10) if i != 7]  # C7 is grey: kept for the edges' web
@@ -38,29 +38,6 @@ class PlotResult:
     renderer: str
     up: str
     missions: list[str]
-
-
-def choose_up(boxes: Sequence[BBox], up: str = "auto") -> int:
-    """The index of the axis to look down: `up` if it names one, else the axis
-    along which the boxes' union is thinnest.
-
-    Raises:
-        UsageError: `up` is not auto, x, y or z.
-    """
-    if up in AXES:
-        return AXES.index(up)
-    if up != "auto":
-        raise UsageError(f"--up must be auto, x, y or z, not {up!r}")
-    if not boxes:
-        return 2
-    union = BBox.enclosing(boxes)
-    extent = [hi - lo for lo, hi in zip(union.mins, union.maxs, strict=True)]
-    return int(np.argmin(extent))
-
-
-def plane_axes(up: int) -> tuple[int, int]:
-    """The two axes of the picture when looking down axis `up` (right-handed)."""
-    return {0: (1, 2), 1: (2, 0), 2: (0, 1)}[up]
 
 
 def plot_map(

@@ -20,7 +20,7 @@ frame lies in the reference's:
 A mission's frame is then the transform taking its stored first vertex to its
 optimised one. The quality figures are the RMS residual of the inter-mission
 edges GNC kept, at the starting alignment and after the optimisation.
-No sockets here: the bench (`mapapi.bench.registration`) moves the missions.
+No sockets here: the bench (`mapbench.registration`) moves the missions.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from mapapi.errors import MapError, UsageError
+from mapapi.core.errors import MapError, UsageError
 from mapapi.maps.alignment import Link, consensus_frame, invert, matrix_pose, pose_matrix, residuals
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, VertexKey
 from mapapi.maps.se3 import Pose, upper_index

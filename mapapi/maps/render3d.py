@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import Points
-from mapapi.maps.plot import plane_axes
-from mapapi.spatial import BBox
+from mapapi.maps.view_axes import plane_axes
 
 log = logging.getLogger(__name__)
 

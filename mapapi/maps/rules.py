@@ -27,11 +27,11 @@ from mapapi.maps.errors import MissionRuleError
 from mapapi.maps.schema import EDGES, VERTICES, Edge, Vertex
 
 if TYPE_CHECKING:
-    from mapapi.commit_check import CommitRule
-    from mapapi.history import Revision
-    from mapapi.ids import ChunkId, ItemId
+    from mapapi.core.history import Revision
+    from mapapi.core.ids import ChunkId, ItemId
+    from mapapi.core.transaction import Change
     from mapapi.store.base import Store
-    from mapapi.transaction import Change
+    from mapapi.swarm.commit_check import CommitRule
 
 Key = tuple[str, int]  # (mission, vertex index)
 KeysOf = Callable[[bytes], tuple[Key, ...]]

@@ -12,9 +12,9 @@ from typing import Protocol
 from google.protobuf.message import Message
 
 from mapapi._pb.mapapi.v1 import maps_pb2
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin
 from mapapi.maps.se3 import Pose
-from mapapi.spatial import BBox
 
 MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS = (
     "missions",

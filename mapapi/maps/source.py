@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 from mapapi.maps.cloud_file import CLOUD_FORMATS, DEFAULT_VOXEL, read_cloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.g2o import read_g2o

@@ -12,7 +12,8 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from mapapi.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud, cloud_from_blocks
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import MissionGraph, Origin
@@ -25,11 +26,10 @@ from mapapi.maps.schema import (
     edge_from_pb,
     pose_from_pb,
 )
-from mapapi.spatial import BBox
 
 if TYPE_CHECKING:
-    from mapapi.peer import Peer
-    from mapapi.transaction import Transaction
+    from mapapi.core.transaction import Transaction
+    from mapapi.service.peer import Peer
 
 log = logging.getLogger(__name__)
 

@@ -20,10 +20,10 @@ from typing import Any, Generic, TypeVar
 
 from google.protobuf.message import DecodeError
 
-from mapapi import limits
 from mapapi._pb.mapapi.v1 import wire_pb2
-from mapapi.errors import LimitExceeded, MapError, ProtocolError
-from mapapi.ids import PeerId
+from mapapi.core import limits
+from mapapi.core.errors import LimitExceeded, MapError, ProtocolError
+from mapapi.core.ids import PeerId
 from mapapi.net import fields, messages
 
 B = TypeVar("B")
@@ -182,7 +182,7 @@ def decode(data: bytes) -> Envelope:
         ProtocolError: the bytes do not parse, a header field is missing or
             invalid (a Lamport time above `limits.MAX_LAMPORT`), the body is
             absent or unknown to this version, or a field of it exceeds its
-            limit in `mapapi.limits` (checked before the body is built).
+            limit in `mapapi.core.limits` (checked before the body is built).
     """
     m = wire_pb2.Envelope()
     try:

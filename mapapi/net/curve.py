@@ -23,8 +23,8 @@ import zmq
 import zmq.asyncio
 import zmq.auth
 
-from mapapi.errors import AccessRefused
-from mapapi.security import Security, key_text
+from mapapi.core.errors import AccessRefused
+from mapapi.net.security import Security, key_text
 
 log = logging.getLogger(__name__)
 

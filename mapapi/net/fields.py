@@ -5,7 +5,7 @@ travel as 16 bytes (empty for None); `Revision` and `CommitRecord` use the
 storage codec; nested dataclasses (`Member`, `TableInfo`) and tuples of any of
 these recurse. Anything malformed on the way in raises ValueError, which the
 envelope decoder turns into ProtocolError; so does a field over its limit in
-`mapapi.limits` (`LimitExceeded` is a ValueError), checked on the protobuf
+`mapapi.core.limits` (`LimitExceeded` is a ValueError), checked on the protobuf
 message before any dataclass is built from it.
 """
 
@@ -16,10 +16,10 @@ import types
 import typing
 from typing import Any
 
-from mapapi import codec as storage
-from mapapi import limits
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import Id
+from mapapi.core import codec as storage
+from mapapi.core import limits
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import Id
 
 _SCALARS = (str, int, float, bool, bytes)
 

@@ -17,9 +17,9 @@ import zmq
 import zmq.asyncio
 from zmq.utils.monitor import parse_monitor_message
 
-from mapapi.errors import AccessRefused, UsageError
+from mapapi.core.errors import AccessRefused, UsageError
 from mapapi.net import curve
-from mapapi.security import Security, split_address
+from mapapi.net.security import Security, split_address
 
 
 @dataclass(slots=True)

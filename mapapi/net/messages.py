@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,7 +163,7 @@ class Bye:
 
 @dataclass(frozen=True, slots=True)
 class ControlCall:
-    """The CLI asks the running peer to perform one `mapapi.ops` operation,
+    """The CLI asks the running peer to perform one `mapapi.service.ops` operation,
     proving with `token` that it runs as the daemon's owner."""
 
     op: str

@@ -22,8 +22,14 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar, overload
 
-from mapapi.errors import AccessRefused, MapError, PeerUnavailable, ProtocolError, RequestTimeout
-from mapapi.ids import PeerId
+from mapapi.core.errors import (
+    AccessRefused,
+    MapError,
+    PeerUnavailable,
+    ProtocolError,
+    RequestTimeout,
+)
+from mapapi.core.ids import PeerId
 from mapapi.net import codec
 from mapapi.net.codec import ErrorReply, Kind
 from mapapi.net.transport import Inbound, Transport
@@ -73,7 +79,7 @@ class Rpc:
         self._ids = itertools.count(1)
         self._closed = False
         self.on_seen: Callable[[PeerId], None] | None = None  # called for every message
-        # Addresses of peers declared dead (`mapapi.liveness`), each with who
+        # Addresses of peers declared dead (`mapapi.swarm.liveness`), each with who
         # answers there ("peer robot2 (146ca670)"): requests to them fail at once
         # instead of waiting out their deadlines, probes excepted.
         self.down: dict[str, str] = {}

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from mapapi import limits
+from mapapi.core import limits
 
 OTHERS = "(others)"
 """The peer key of traffic from peers beyond `limits.MAX_STATS_KEYS`."""

@@ -33,16 +33,22 @@ from typing import Any, Protocol, cast
 import zmq
 import zmq.asyncio
 
-from mapapi import limits
-from mapapi.clock import LamportClock
-from mapapi.errors import AccessRefused, LimitExceeded, NetworkError, PeerUnavailable, ProtocolError
-from mapapi.ids import PeerId
+from mapapi.core import limits
+from mapapi.core.clock import LamportClock
+from mapapi.core.errors import (
+    AccessRefused,
+    LimitExceeded,
+    NetworkError,
+    PeerUnavailable,
+    ProtocolError,
+)
+from mapapi.core.ids import PeerId
 from mapapi.net import codec, curve
 from mapapi.net.codec import Envelope, ErrorReply, Kind
 from mapapi.net.links import Link
+from mapapi.net.security import Security, keyed_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.stats import Stats
-from mapapi.security import Security, keyed_address
 
 log = logging.getLogger(__name__)
 

@@ -7,8 +7,8 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 
 IdKind = Literal["item", "chunk", "commit"]
 

@@ -14,7 +14,7 @@ import os
 import sqlite3
 from pathlib import Path
 
-from mapapi.errors import CorruptRepoError, RepoError
+from mapapi.core.errors import CorruptRepoError, RepoError
 
 SQLITE_HEADER = b"SQLite format 3\x00"
 _RESTORE = "restore it from a backup or clone the repository again"

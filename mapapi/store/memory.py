@@ -6,9 +6,9 @@ import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-from mapapi.errors import ChunkNotFound, UsageError
-from mapapi.history import CommitRecord, ItemHistory, Revision, revision_at
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.errors import ChunkNotFound, UsageError
+from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store.base import ChunkInfo, IdKind, newest_first
 
 

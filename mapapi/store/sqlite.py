@@ -15,9 +15,9 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from mapapi.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageError
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageError
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store.base import ChunkInfo, IdKind
 from mapapi.store.file_check import check_file, check_schema
 

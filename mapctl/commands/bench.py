@@ -26,7 +26,7 @@ def bench() -> None:
 @json_option
 def bench_local(commits: int, directory: str | None, as_json: bool) -> None:
     """Single-peer figures: commits/s, past-time reads/s, CLI startup."""
-    from mapapi.bench.local import run_local
+    from mapbench.local import run_local
     from mapctl import render
 
     result = run_local(commits, directory)
@@ -86,7 +86,7 @@ def bench_viewtest(
     Every peer retries on conflict; afterwards every peer must read a0 + P*N
     and hold the same commit log, or the command fails (exit 1).
     """
-    from mapapi.bench.swarm import check_viewtest, viewtest
+    from mapbench.swarm import check_viewtest, viewtest
 
     result = viewtest(peers, n, a0=a0, directory=directory, use_uvloop=use_uvloop, secure=secure)
     _render(f"bench viewtest: {peers} peers x {n}", result, as_json)
@@ -126,7 +126,7 @@ def bench_commit(
     as_json: bool,
 ) -> None:
     """Uncontended commit latency: one writer, a chunk held by K peer processes."""
-    from mapapi.bench.swarm import commit_latency
+    from mapbench.swarm import commit_latency
 
     result = commit_latency(
         holders,
@@ -195,7 +195,7 @@ def bench_lookup(
     failed lookup counts in `errors`. With --json, one object per ring, one per
     line.
     """
-    from mapapi.bench.lookup import SWEEP, environment, measure_lookups
+    from mapbench.lookup import SWEEP, environment, measure_lookups
 
     sizes = sorted({*peers, *SWEEP}) if sweep else list(dict.fromkeys(peers or (32,)))
     machine = environment()  # before the runs, whose own load would count otherwise
@@ -205,7 +205,7 @@ def bench_lookup(
         _render(f"bench lookup: {size} peers", result, as_json)
         results.append(result)
     if plot:
-        from mapapi.bench.plot import plot_lookup
+        from mapbench.plot import plot_lookup
 
         plot_lookup(results, plot, machine)
 
@@ -263,8 +263,8 @@ def bench_spatial(
     same missions, or the command fails (exit 1). With --json, one object per
     (dataset, cells, latency), one per line.
     """
-    from mapapi.bench import spatial
-    from mapapi.bench.lookup import environment
+    from mapbench import spatial
+    from mapbench.lookup import environment
 
     machine = environment()  # before the runs, whose own load would count otherwise
     rows = []
@@ -284,7 +284,7 @@ def bench_spatial(
             rows.append(row)
     spatial.check_spatial(rows)
     if plot:
-        from mapapi.bench.plot import plot_spatial
+        from mapbench.plot import plot_spatial
 
         plot_spatial(rows, plot, machine)
 
@@ -342,7 +342,7 @@ def bench_registration(
     frames, or the command fails (exit 1). Needs gtsam (`pip install
     'mapapi[registration]'`). With --json, one object.
     """
-    from mapapi.bench import registration
+    from mapbench import registration
 
     sizes = registration.QUICK if quick else {}
     layout = registration.plan(
@@ -362,7 +362,7 @@ def bench_registration(
     _render_registration(result, as_json)
     registration.check_registration(result)
     if plot:
-        from mapapi.bench.plot_registration import plot_registration
+        from mapbench.plot_registration import plot_registration
 
         plot_registration(result, plot)
 
@@ -438,7 +438,7 @@ def bench_import(
 
     With --json, one object per data set, one per line.
     """
-    from mapapi.bench.maps import DATASETS, measure_import
+    from mapbench.maps import DATASETS, measure_import
 
     for dataset in datasets or DATASETS:
         result = measure_import(dataset, runs=runs, store=store, directory=directory)
@@ -506,8 +506,8 @@ def bench_triggers(
     must know exactly the commits inside the region, or the command fails
     (exit 1). With --json, one object per (fraction, mode), one per line.
     """
-    from mapapi.bench import triggers
-    from mapapi.bench.lookup import environment
+    from mapbench import triggers
+    from mapbench.lookup import environment
 
     machine = environment()  # before the runs, whose own load would count otherwise
     rows = triggers.measure_triggers(
@@ -525,7 +525,7 @@ def bench_triggers(
         _render(title, row, as_json)
     triggers.check_triggers(rows)
     if plot:
-        from mapapi.bench.plot import plot_triggers
+        from mapbench.plot import plot_triggers
 
         plot_triggers(rows, plot, machine)
 
@@ -554,7 +554,7 @@ def bench_fuzz(messages_n: int, seed: int, directory: str | None, as_json: bool)
     through it, and its store must be intact and changed only by acknowledged
     commits. Fails (exit 1) otherwise.
     """
-    from mapapi.bench.fuzz import check_fuzz, run_fuzz
+    from mapbench.fuzz import check_fuzz, run_fuzz
 
     report = run_fuzz(messages_n, seed, directory)
     _render(f"bench fuzz: {messages_n} messages, seed {seed}", report, as_json)
@@ -587,7 +587,7 @@ def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_
     import shutil
     import tempfile
 
-    from mapapi.bench.soak import measure_soak
+    from mapbench.soak import measure_soak
     from mapctl import render
 
     def progress(tally: dict[str, Any]) -> None:
@@ -624,7 +624,7 @@ def bench_plot(kind: str, results: tuple[str, ...], output: str) -> None:
     latency and messages per commit against holders. Needs matplotlib (the
     `dev` extra).
     """
-    from mapapi.bench.plot import load_results, plot_commit, plot_viewtest
+    from mapbench.plot import load_results, plot_commit, plot_viewtest
 
     rows = load_results(results)
     (plot_viewtest if kind == "viewtest" else plot_commit)(rows, output)

@@ -46,7 +46,7 @@ def demo(out: Path, peers: int, as_json: bool) -> None:
     a summary (--json: as JSON) and writes PNGs of the map and the query to
     --out. Every peer process is stopped at the end, also on Ctrl-C or an error.
     """
-    from mapapi.demo import run_demo
+    from mapbench.demo import run_demo
     from mapctl import render
 
     with render.steps() as show:

@@ -20,7 +20,7 @@ def _author(row: dict[str, Any], verbose: bool) -> str:
 
 def _cell(key: str, row: dict[str, Any], verbose: bool) -> Any:
     """How a log column reads for humans: names, short ids, JSON data, chunk counts."""
-    value = row.get(key)
+    value: Any = row.get(key)
     if key == "author":
         return _author(row, verbose)
     if key == "commit":

@@ -12,7 +12,7 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 if TYPE_CHECKING:
-    from mapapi.repo import PeerRecord, Repository
+    from mapapi.service.repo import PeerRecord, Repository
 
 
 _LISTEN_HELP = (
@@ -22,7 +22,7 @@ _LISTEN_HELP = (
 
 
 def _repo(session: Session) -> Repository:
-    from mapapi.repo import Repository
+    from mapapi.service.repo import Repository
 
     return Repository.find(session.path)
 
@@ -70,8 +70,8 @@ def peer_start(
     With --json print {"id", "address", "join"}. In the foreground it serves until
     Ctrl-C (or `mapctl peer stop`); with --detach it returns once the peer serves.
     """
-    from mapapi import daemon
-    from mapapi.ops import check_address
+    from mapapi.service import daemon
+    from mapapi.service.ops import check_address
     from mapctl import render
 
     repo = _repo(session)
@@ -104,7 +104,7 @@ def peer_start(
 @pass_session
 def peer_stop(session: Session, as_json: bool) -> None:
     """Stop the running peer gracefully (it says goodbye to the swarm)."""
-    from mapapi import daemon
+    from mapapi.service import daemon
     from mapctl import render
 
     repo = _repo(session)
@@ -257,7 +257,7 @@ def _clone_target(directory: Path, address: str, name: str | None) -> tuple[Repo
             is no repository yet (the swarm cannot trust a key made on the spot).
     """
     from mapapi import Repository, UsageError
-    from mapapi.security import split_address
+    from mapapi.net.security import split_address
 
     if (directory / ".mapapi" / "config.toml").is_file():
         repo = Repository.find(directory)
@@ -306,8 +306,9 @@ def clone(
     DIR may also be a repository `mapctl init` just made (still empty): that is how
     a secure swarm is cloned, since the swarm must trust the new peer's key first.
     """
-    from mapapi import MapError, daemon
-    from mapapi.ops import check_address
+    from mapapi import MapError
+    from mapapi.service import daemon
+    from mapapi.service.ops import check_address
     from mapctl import render
 
     check_address(address)

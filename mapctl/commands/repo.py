@@ -48,9 +48,9 @@ def init(
     talks only to secure peers whose keys it trusts (`mapctl trust add`).
     """
     from mapapi import Repository
-    from mapapi.errors import AlreadyInitialisedError
-    from mapapi.security import key_text
-    from mapapi.spatial import DEFAULT_BOUNDS, DEFAULT_CELLS, BBox, SpatialGrid
+    from mapapi.core.errors import AlreadyInitialisedError
+    from mapapi.lookup.spatial import DEFAULT_BOUNDS, DEFAULT_CELLS, BBox, SpatialGrid
+    from mapapi.net.security import key_text
     from mapctl import render
 
     grid = SpatialGrid(

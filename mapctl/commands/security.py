@@ -13,12 +13,12 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 if TYPE_CHECKING:
-    from mapapi.security import Security
+    from mapapi.net.security import Security
 
 
 def _security(session: Session) -> Security:
-    from mapapi.errors import UsageError
-    from mapapi.repo import Repository
+    from mapapi.core.errors import UsageError
+    from mapapi.service.repo import Repository
 
     repo = Repository.find(session.path)
     security = repo.security()
@@ -40,7 +40,7 @@ def key() -> None:
 @pass_session
 def key_show(session: Session, as_json: bool) -> None:
     """Print this peer's public key: what other peers pass to `trust add`."""
-    from mapapi.security import key_text
+    from mapapi.net.security import key_text
     from mapctl import render
 
     public = key_text(_security(session).keys.public)
@@ -61,7 +61,7 @@ def trust() -> None:
 @pass_session
 def trust_add(session: Session, keys: tuple[str, ...], as_json: bool) -> None:
     """Trust each KEY (64 hex digits, as `mapctl key show` prints them)."""
-    from mapapi.security import key_text, parse_key
+    from mapapi.net.security import key_text, parse_key
     from mapctl import render
 
     security = _security(session)
@@ -79,7 +79,7 @@ def trust_add(session: Session, keys: tuple[str, ...], as_json: bool) -> None:
 @pass_session
 def trust_list(session: Session, as_json: bool) -> None:
     """List the trusted keys (this peer's own key is always trusted, and not listed)."""
-    from mapapi.security import key_text
+    from mapapi.net.security import key_text
     from mapctl import render
 
     keys = sorted(key_text(k) for k in _security(session).trust.current())
@@ -96,7 +96,7 @@ def trust_list(session: Session, as_json: bool) -> None:
 def trust_remove(session: Session, key_arg: str, as_json: bool) -> None:
     """Stop trusting KEY: its new connections are refused (restart the peer to
     also cut the ones open now)."""
-    from mapapi.security import key_text, parse_key
+    from mapapi.net.security import key_text, parse_key
     from mapctl import render
 
     parsed = parse_key(key_arg)

@@ -53,7 +53,7 @@ def watch(
     Needs the running peer: it subscribes to the region in the swarm's spatial
     index, and committers push only the matching changes to it. Ctrl-C stops.
     """
-    from mapapi.errors import WatchTimeout
+    from mapapi.core.errors import WatchTimeout
     from mapctl import render
 
     started = session.call(

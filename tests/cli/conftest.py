@@ -21,8 +21,8 @@ import pytest
 from click.testing import CliRunner, Result
 
 from mapapi import Repository
-from mapapi.daemon import serve
-from mapapi.repo import PeerRecord
+from mapapi.service.daemon import serve
+from mapapi.service.repo import PeerRecord
 from mapctl.cli import cli, main
 
 STRUCT = "google.protobuf.Struct"

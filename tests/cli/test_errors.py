@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from mapapi import NetworkError, Peer, Repository
-from mapapi.errors import ADVICE_VERBS
-from mapapi.ids import ChunkId
+from mapapi.core.errors import ADVICE_VERBS
+from mapapi.core.ids import ChunkId
 from mapapi.net.codec import error_from_reply, error_reply
 from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl, run_main
 

@@ -21,7 +21,7 @@ from typing import Any
 import click
 import pytest
 
-from mapapi.table import message_class
+from mapapi.core.table import message_class
 from mapctl.cli import cli
 from tests.cli.json_scenario import (
     BENCHMARKS,

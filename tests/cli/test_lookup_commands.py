@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from mapapi import Repository
-from mapapi.spatial import BBox, SpatialGrid
+from mapapi.lookup.spatial import BBox, SpatialGrid
 from mapctl.cli import cli
 
 from .conftest import STRUCT, InProcessDaemon, Mapctl, run_main

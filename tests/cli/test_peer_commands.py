@@ -1,7 +1,7 @@
 """`mapctl peer ...`, `peers`, `join`, `chunk participate|leave` and the CLI path.
 
 Without a daemon the swarm commands exit 5 with a hint; a stale pid file is
-ignored. A daemon served in the test's own event loop (`mapapi.daemon.serve`)
+ignored. A daemon served in the test's own event loop (`mapapi.service.daemon.serve`)
 shows that every command goes through its control endpoint while it runs, with
 the same exit codes; the CLI runs in a worker thread meanwhile. The detached
 start and a SIGKILLed daemon use real processes (marked slow).
@@ -20,9 +20,10 @@ from pathlib import Path
 
 import pytest
 
-from mapapi import Repository, known_peers
-from mapapi.daemon import advertised_address, stop_daemon
-from mapapi.repo import PeerRecord
+from mapapi import Repository
+from mapapi.service import known_peers
+from mapapi.service.daemon import advertised_address, stop_daemon
+from mapapi.service.repo import PeerRecord
 from mapapi.testing import wait_until
 from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl
 

@@ -12,7 +12,7 @@ import pytest
 from zmq.utils import z85
 
 from mapapi import Peer
-from mapapi.security import split_address
+from mapapi.net.security import split_address
 from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl, run_main
 
 EXIT_USAGE, EXIT_OTHER, EXIT_NETWORK = 2, 1, 5

@@ -1,6 +1,6 @@
 """Paper Algorithm 1 across 4 peer processes x 50 increments (issue 3, DESIGN §12).
 
-Four `mapapi.bench.worker` processes on loopback hold one counter chunk; each
+Four `mapbench.worker` processes on loopback hold one counter chunk; each
 runs 50 increments at once (begin, get, update value + 1, commit, retry on
 conflict). Afterwards every peer must read a0 + P*N and hold the identical
 commit log. The children are driven over their acknowledged line protocol
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from mapapi.bench.swarm import WorkerProcess, counter_swarm, run_increments, spawn_workers
 from mapapi.testing import wait_until
+from mapbench.swarm import WorkerProcess, counter_swarm, run_increments, spawn_workers
 
 pytestmark = pytest.mark.slow
 

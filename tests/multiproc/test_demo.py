@@ -19,9 +19,9 @@ from typing import Any
 import pytest
 from PIL import Image
 
-from mapapi.demo import TUNNELS
 from mapapi.maps import read_kimera
 from mapapi.testing import wait_until
+from mapbench.demo import TUNNELS
 
 from .conftest import MAPCTL
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from mapapi.security import split_address
+from mapapi.net.security import split_address
 
 from .conftest import COMMAND_TIMEOUT, MAPCTL, Daemons, mapctl, mapctl_json, run_mapctl
 

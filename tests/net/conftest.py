@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from mapapi.clock import LamportClock
-from mapapi.ids import PeerId
+from mapapi.core.clock import LamportClock
+from mapapi.core.ids import PeerId
 from mapapi.net import Ping, Pong, Request, Rpc, Shaper, ZmqTransport
 
 MakeRpc = Callable[..., Awaitable[Rpc]]

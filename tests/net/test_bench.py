@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from mapapi.net.bench import measure_round_trip, summarize
+from mapbench.net import measure_round_trip, summarize
 
 
 async def test_measure_round_trip_in_process() -> None:

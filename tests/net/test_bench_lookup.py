@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.lookup import measure_lookups, target_mean_hops
+from mapbench.lookup import measure_lookups, target_mean_hops
 from mapctl.cli import cli
 
 PROMISED = {"peers", "mean_hops", "p99_hops", "p50_ms", "p99_ms", "errors"}

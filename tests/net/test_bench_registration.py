@@ -13,15 +13,15 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.registration import (
+from mapapi.core.errors import UsageError
+from mapapi.maps.graph import EdgeKind
+from mapbench.registration import (
     RegistrationCheckFailed,
     check_registration,
     cut,
     measure_registration,
     plan,
 )
-from mapapi.errors import UsageError
-from mapapi.maps.graph import EdgeKind
 from mapctl.cli import cli
 from tests.cli.conftest import run_main
 

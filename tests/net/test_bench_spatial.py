@@ -12,7 +12,9 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.spatial import (
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
+from mapbench.spatial import (
     SpatialCheckFailed,
     check_spatial,
     grid_for,
@@ -20,8 +22,6 @@ from mapapi.bench.spatial import (
     measure_spatial,
     query_boxes,
 )
-from mapapi.errors import UsageError
-from mapapi.spatial import BBox
 from mapctl.cli import cli
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"

@@ -11,10 +11,10 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.trigger_workload import AREA, REGION, plan_workload
-from mapapi.bench.triggers import MODES, TriggersCheckFailed, check_triggers, measure_triggers
-from mapapi.errors import UsageError
-from mapapi.spatial import BBox
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
+from mapbench.trigger_workload import AREA, REGION, plan_workload
+from mapbench.triggers import MODES, TriggersCheckFailed, check_triggers, measure_triggers
 from mapctl.cli import cli
 
 KEYS = {

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from mapapi import errors, limits
-from mapapi.errors import ConflictError, LockTimeout, MapError, ProtocolError
-from mapapi.ids import PeerId
+from mapapi.core import errors, limits
+from mapapi.core.errors import ConflictError, LockTimeout, MapError, ProtocolError
+from mapapi.core.ids import PeerId
 from mapapi.net import codec, messages
 from mapapi.net.codec import Envelope, ErrorReply, Kind, Ping, Pong
 

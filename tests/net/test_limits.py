@@ -3,7 +3,7 @@
 Every case sends the hostile message over real zmq sockets on 127.0.0.1 to a
 real endpoint (an Rpc, a Chord node, a started peer) and checks the error the
 sender gets back, that the receiver kept nothing of it, and that it still
-serves. The limits themselves live in `mapapi.limits`.
+serves. The limits themselves live in `mapapi.core.limits`.
 """
 
 from __future__ import annotations
@@ -18,12 +18,14 @@ import zmq
 import zmq.asyncio
 from google.protobuf import struct_pb2
 
-from mapapi import limits
 from mapapi._pb.mapapi.v1 import lookup_pb2
-from mapapi.dht.chord import ChordNode, key_bytes
-from mapapi.errors import LimitExceeded, LockNotHeld, ProtocolError, UsageError
-from mapapi.history import Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core import limits
+from mapapi.core.errors import LimitExceeded, LockNotHeld, ProtocolError, UsageError
+from mapapi.core.history import Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.lookup.dht.chord import ChordNode, key_bytes
+from mapapi.lookup.spatial import BBox
+from mapapi.lookup.spatial_index import encode_filter
 from mapapi.net import Ping, Pong, codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
 from mapapi.net.messages import (
@@ -42,10 +44,8 @@ from mapapi.net.messages import (
     Welcome,
 )
 from mapapi.net.stats import OTHERS, Stats
-from mapapi.peer import Peer
-from mapapi.spatial import BBox
-from mapapi.spatial_index import encode_filter
-from mapapi.subscriptions import SubscriptionSpec, decode_subscription, region_filter
+from mapapi.service.peer import Peer
+from mapapi.swarm.subscriptions import SubscriptionSpec, decode_subscription, region_filter
 
 from .conftest import MakeRpc
 

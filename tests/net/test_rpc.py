@@ -7,8 +7,8 @@ import logging
 
 import pytest
 
-from mapapi.clock import LamportClock
-from mapapi.errors import (
+from mapapi.core.clock import LamportClock
+from mapapi.core.errors import (
     LockTimeout,
     MapError,
     PeerUnavailable,

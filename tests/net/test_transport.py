@@ -10,8 +10,8 @@ import pytest
 import zmq
 import zmq.asyncio
 
-from mapapi.errors import NetworkError, PeerUnavailable, ProtocolError, RequestTimeout
-from mapapi.ids import PeerId
+from mapapi.core.errors import NetworkError, PeerUnavailable, ProtocolError, RequestTimeout
+from mapapi.core.ids import PeerId
 from mapapi.net import Ping, Pong, Request, Rpc, ZmqTransport, codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
 

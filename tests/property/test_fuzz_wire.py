@@ -1,12 +1,12 @@
 """Hostile messages never crash a peer or corrupt its store (DESIGN §11, issue 7 §5).
 
-A real peer process (with a holder and a member, `mapapi.bench.fuzz.target_swarm`)
+A real peer process (with a holder and a member, `mapbench.fuzz.target_swarm`)
 receives messages of every body type from a real zmq socket, as strangers and
 as a member: valid, with hostile fields (wrong id lengths, huge counts and
 numbers, NaN, unknown enum values, random bytes) or broken as bytes (bit
 flips, truncations), plus commits step by step. Hypothesis draws each
 example's body type, mode and the seed of the generator
-(`mapapi.bench.hostile`) that fills the fields; the target's answers steer
+(`mapbench.hostile`) that fills the fields; the target's answers steer
 later messages (lock tokens), so the fields are not drawn by hypothesis
 itself, whose replays must not depend on outside state. Each example's answers are checked as
 they arrive (an "internal error" reply or a wrong reply fails it); after all
@@ -28,11 +28,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mapapi.bench import store_check
-from mapapi.bench.fuzz import Target, commit_flow, finish, target_swarm
-from mapapi.bench.fuzz_client import Fuzzer
-from mapapi.bench.hostile import BODIES, MODES, Generator
-from mapapi.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, PeerId
+from mapbench import store_check
+from mapbench.fuzz import Target, commit_flow, finish, target_swarm
+from mapbench.fuzz_client import Fuzzer
+from mapbench.hostile import BODIES, MODES, Generator
 
 EXAMPLES = 600
 PER_EXAMPLE = 6  # messages per example: the drawn body first, then any

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-from mapapi.errors import LockNotHeld
-from mapapi.ids import PeerId
-from mapapi.lock import ChunkLock, Grant
+from mapapi.core.errors import LockNotHeld
+from mapapi.core.ids import PeerId
+from mapapi.swarm.lock import ChunkLock, Grant
 
 WRITERS = [PeerId(f"{i:032x}") for i in range(1, 5)]
 

@@ -1,4 +1,4 @@
-"""Chord routing invariants (mapapi.dht.ring, DESIGN §7): lookups routed with
+"""Chord routing invariants (mapapi.lookup.dht.ring, DESIGN §7): lookups routed with
 `next_hop` over correct finger tables and successor lists agree with the
 sorted-ring oracle, and take O(log N) hops.
 
@@ -15,7 +15,8 @@ from itertools import pairwise
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from mapapi.dht.ring import (
+from mapapi.core.ids import PeerId
+from mapapi.lookup.dht.ring import (
     RING_BITS,
     RING_SIZE,
     SortedRing,
@@ -26,7 +27,6 @@ from mapapi.dht.ring import (
     peer_key,
     responsible,
 )
-from mapapi.ids import PeerId
 
 SUCCESSORS = 4  # DESIGN §7 default
 

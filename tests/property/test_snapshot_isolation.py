@@ -29,8 +29,8 @@ from hypothesis.stateful import (
 )
 
 from mapapi import ChunkId, ConflictError, ItemId, Peer, Transaction
+from mapapi.core.transaction import Isolation
 from mapapi.store.sqlite import SqliteStore
-from mapapi.transaction import Isolation
 
 TABLE = "values"
 ITEMS = [ItemId(f"{i:032x}") for i in range(1, 6)]

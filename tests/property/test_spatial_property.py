@@ -1,5 +1,5 @@
 """Spatial index invariants (DESIGN §7): the fast cell arithmetic of
-`mapapi.spatial` equals brute force over every cell, on random grids, boxes and
+`mapapi.lookup.spatial` equals brute force over every cell, on random grids, boxes and
 points; and a query of the index over a real Chord ring returns exactly what a
 brute-force filter over every registered box returns."""
 
@@ -16,11 +16,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mapapi.bench.ring import still_ring
-from mapapi.dht.chord import ChordNode
-from mapapi.ids import ChunkId, PeerId
-from mapapi.spatial import BBox, Point, SpatialGrid
-from mapapi.spatial_index import SpatialIndex, SpatialRef
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.lookup.dht.chord import ChordNode
+from mapapi.lookup.spatial import BBox, Point, SpatialGrid
+from mapapi.lookup.spatial_index import SpatialIndex, SpatialRef
+from mapbench.ring import still_ring
 
 T = TypeVar("T")
 

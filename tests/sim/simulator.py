@@ -1,4 +1,4 @@
-"""A deterministic simulator for `mapapi.raft`: real `RaftNode`s, fake network, fake clock.
+"""A deterministic simulator for `mapapi.swarm.raft`: real `RaftNode`s, fake network, fake clock.
 
 Everything comes from one seed (FoundationDB / TigerBeetle VOPR style): per-message delay, drop,
 duplication (and so reordering), symmetric and one-way partitions that heal, paused nodes,
@@ -17,8 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from mapapi.raft import RaftNode, RaftOptions
-from mapapi.raft_types import (
+from mapapi.swarm.raft import RaftNode, RaftOptions
+from mapapi.swarm.raft_types import (
     ConfChange,
     ConfChangeKind,
     Config,

@@ -14,9 +14,9 @@ import pytest
 
 from mapapi import ChunkId, ConflictError, ItemId, LockTimeout, Peer
 from mapapi._pb.mapapi.v1.types_pb2 import Account, Counter
-from mapapi.dht.ring import SortedRing
-from mapapi.swarm import ChordOptions
-from mapapi.swarm import Swarm as PeerSwarm
+from mapapi.lookup.dht.ring import SortedRing
+from mapapi.swarm.node import ChordOptions
+from mapapi.swarm.node import Swarm as PeerSwarm
 
 TABLE = "counters"
 ACCOUNTS = "accounts"

@@ -16,9 +16,9 @@ from typing import Any
 
 import pytest
 
-from mapapi.dht.chord import ChordNode, key_bytes
-from mapapi.dht.ring import SortedRing, chunk_key
-from mapapi.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.lookup.dht.chord import ChordNode, key_bytes
+from mapapi.lookup.dht.ring import SortedRing, chunk_key
 from mapapi.net.messages import Ack, ChordAdd, ChordRemove
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport

@@ -10,7 +10,7 @@ import random
 import pytest
 
 from mapapi import ChunkId, ConflictError, ItemId, LockTimeout, Peer
-from mapapi.transaction import Isolation
+from mapapi.core.transaction import Isolation
 from tests.swarm.conftest import (
     ACCOUNTS,
     TABLE,

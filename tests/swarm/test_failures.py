@@ -15,17 +15,17 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import pytest
 
-from mapapi import faults
-from mapapi.dht.ring import chunk_key
-from mapapi.errors import CommitUncertain, MapError, PeerUnavailable, RequestTimeout
-from mapapi.history import CommitRecord
-from mapapi.ids import ChunkId, ItemId
-from mapapi.liveness import LivenessOptions
+from mapapi.core import faults
+from mapapi.core.errors import CommitUncertain, MapError, PeerUnavailable, RequestTimeout
+from mapapi.core.history import CommitRecord
+from mapapi.core.ids import ChunkId, ItemId
+from mapapi.lookup.dht.ring import chunk_key
 from mapapi.net.messages import CommitApply
 from mapapi.net.rpc import Request
-from mapapi.peer import Peer
-from mapapi.replication import encode_holder
-from mapapi.repo import Repository
+from mapapi.service.peer import Peer
+from mapapi.service.repo import Repository
+from mapapi.swarm.liveness import LivenessOptions
+from mapapi.swarm.replication import encode_holder
 from mapapi.testing import until
 
 from .conftest import TABLE, Counter, counter_chunk, net, share, value

@@ -9,10 +9,10 @@ from typing import Any
 import pytest
 
 from mapapi import ChunkId, CommitId, CommitRecord, LockTimeout, Peer, PeerId
-from mapapi.errors import LockNotHeld
-from mapapi.lock import Grant
-from mapapi.lock_client import Held
+from mapapi.core.errors import LockNotHeld
 from mapapi.net.messages import CommitApply, CommitBatch, HolderChange, LockRequest, Unlock
+from mapapi.swarm.lock import Grant
+from mapapi.swarm.lock_client import Held
 from tests.swarm.conftest import (
     TABLE,
     Counter,

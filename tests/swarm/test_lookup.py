@@ -9,9 +9,9 @@ every registration lands at the key's real owner.
 from __future__ import annotations
 
 from mapapi import ChunkId, Peer
-from mapapi.dht.ring import chunk_key
-from mapapi.ops import Operations
-from mapapi.replication import decode_holder
+from mapapi.lookup.dht.ring import chunk_key
+from mapapi.service.ops import Operations
+from mapapi.swarm.replication import decode_holder
 
 from .conftest import TABLE, MakePeer, counter_chunk, lookup_swarm, net, value
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from mapapi import Peer
+from mapapi.lookup.spatial import BBox
 from mapapi.maps import (
     CLOUDS,
     MISSIONS,
@@ -22,8 +23,7 @@ from mapapi.maps import (
     read_g2o,
 )
 from mapapi.maps.cloud_file import read_cloud
-from mapapi.ops import Operations
-from mapapi.spatial import BBox
+from mapapi.service.ops import Operations
 
 from .conftest import MakePeer, lookup_swarm
 

@@ -11,7 +11,7 @@ import zmq
 import zmq.asyncio
 
 from mapapi import ChunkId, CommitId, CommitRecord, Peer, PeerId
-from mapapi.errors import JoinRefused, LockNotHeld, ProtocolError, UsageError
+from mapapi.core.errors import JoinRefused, LockNotHeld, ProtocolError, UsageError
 from mapapi.net import Ping, Pong, codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
 from mapapi.net.messages import (

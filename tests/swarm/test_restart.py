@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from mapapi import NotParticipatingError, Peer
-from mapapi.errors import PeerNotRunning
+from mapapi.core.errors import PeerNotRunning
 from mapapi.store import SqliteStore
 
 from .conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, net, share, value

@@ -15,11 +15,11 @@ from pathlib import Path
 import pytest
 
 from mapapi import Peer, PeerId
-from mapapi.errors import AccessRefused
+from mapapi.core.errors import AccessRefused
 from mapapi.net.messages import ChunkList, ChunkListQuery, Hello, Member
 from mapapi.net.rpc import Rpc
+from mapapi.net.security import Security, key_text, keyed_address, split_address
 from mapapi.net.transport import ZmqTransport
-from mapapi.security import Security, key_text, keyed_address, split_address
 from tests.swarm.conftest import TABLE, Counter, counter_chunk, net, share, value
 
 MakePeer = Callable[..., Awaitable[Peer]]

@@ -14,10 +14,10 @@ from google.protobuf import struct_pb2
 
 from mapapi import ChunkId, Peer
 from mapapi._pb.mapapi.v1 import maps_pb2
-from mapapi.errors import InvalidBBox, JoinRefused, ProtocolError
-from mapapi.ids import ItemId
-from mapapi.spatial import BBox, SpatialGrid
-from mapapi.spatial_index import QueryStats, SpatialRef, encode_filter
+from mapapi.core.errors import InvalidBBox, JoinRefused, ProtocolError
+from mapapi.core.ids import ItemId
+from mapapi.lookup.spatial import BBox, SpatialGrid
+from mapapi.lookup.spatial_index import QueryStats, SpatialRef, encode_filter
 
 from .conftest import FAST, MakePeer, lookup_swarm, net
 

@@ -14,10 +14,10 @@ from __future__ import annotations
 from google.protobuf import struct_pb2
 
 from mapapi import ChunkId, ItemId, Peer
-from mapapi.spatial import BBox
-from mapapi.subscriptions import Subscription, SubscriptionSpec
-from mapapi.swarm import ChordOptions
-from mapapi.triggers import CommitEvent
+from mapapi.lookup.spatial import BBox
+from mapapi.swarm.node import ChordOptions
+from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec
+from mapapi.swarm.triggers import CommitEvent
 
 from .conftest import FAST, MakePeer, lookup_swarm, net
 

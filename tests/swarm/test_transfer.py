@@ -6,9 +6,10 @@ from collections.abc import Awaitable, Callable
 
 import pytest
 
-from mapapi import Peer, replication
+from mapapi import Peer
 from mapapi.net import LinkShape, Shaper
-from mapapi.ops import Operations
+from mapapi.service.ops import Operations
+from mapapi.swarm import replication
 
 from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, increment, net, value
 

@@ -8,7 +8,7 @@ import asyncio
 import threading
 
 from mapapi import ConflictError, ItemId, LockTimeout, Peer
-from mapapi.triggers import CommitEvent
+from mapapi.swarm.triggers import CommitEvent
 
 from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, log_ids, share, value
 

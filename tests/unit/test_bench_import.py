@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.maps import measure_import
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
+from mapbench.maps import measure_import
 from mapctl.cli import cli
 
 RATES = ("parse_per_s", "parse_stage_per_s", "end_to_end_per_s")

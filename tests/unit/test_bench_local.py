@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from mapapi.bench.local import run_local
+from mapbench.local import run_local
 
 RATES = (
     "commits_per_s_1_item",

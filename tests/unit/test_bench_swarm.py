@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-from mapapi.bench.swarm import SwarmCheckFailed, check_viewtest, commit_latency, percentile
+from mapbench.swarm import SwarmCheckFailed, check_viewtest, commit_latency, percentile
 from mapctl.cli import cli
 
 VIEWTEST_KEYS = (
@@ -64,7 +64,7 @@ def test_percentile_is_nearest_rank() -> None:
 
 def test_plots_are_written(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
-    from mapapi.bench.plot import load_results, plot_commit, plot_viewtest
+    from mapbench.plot import load_results, plot_commit, plot_viewtest
 
     views = tmp_path / "viewtest.jsonl"
     views.write_text(

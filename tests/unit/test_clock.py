@@ -1,10 +1,10 @@
-"""The Lamport clock (mapapi.clock, DESIGN §4)."""
+"""The Lamport clock (mapapi.core.clock, DESIGN §4)."""
 
 import threading
 
 import pytest
 
-from mapapi.clock import LamportClock
+from mapapi.core.clock import LamportClock
 
 
 class TestLamportClock:

@@ -1,14 +1,14 @@
-"""Core dataclasses to protobuf and back (mapapi.codec)."""
+"""Core dataclasses to protobuf and back (mapapi.core.codec)."""
 
 import pytest
 
-from mapapi import codec
-from mapapi.errors import CorruptRepoError
-from mapapi.history import Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.table import message_class
-from mapapi.transaction import Change, Conflict, Op
-from mapapi.view import View
+from mapapi.core import codec
+from mapapi.core.errors import CorruptRepoError
+from mapapi.core.history import Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.table import message_class
+from mapapi.core.transaction import Change, Conflict, Op
+from mapapi.core.view import View
 
 CHUNK = ChunkId.new()
 ViewState = message_class("mapapi.v1.ViewState")

@@ -1,4 +1,4 @@
-"""What a holder refuses to stage (mapapi.commit_check, DESIGN §5 and §11).
+"""What a holder refuses to stage (mapapi.swarm.commit_check, DESIGN §5 and §11).
 
 A real commit batch passes; each way a hostile or broken writer could make one
 break the store (an item of another chunk, a wrong table, a stale time, a
@@ -13,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from mapapi import limits
 from mapapi._pb.mapapi.v1.types_pb2 import Counter
-from mapapi.commit_check import check_batch
-from mapapi.errors import ChunkNotFound, LimitExceeded, UsageError
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core import limits
+from mapapi.core.errors import ChunkNotFound, LimitExceeded, UsageError
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store.sqlite import SqliteStore
+from mapapi.swarm.commit_check import check_batch
 
 WRITER = PeerId.new()
 TABLE = "counters"

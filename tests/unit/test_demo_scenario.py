@@ -1,11 +1,11 @@
-"""The pure parts of `mapctl demo` (mapapi.demo.scenario): which robots each peer imports."""
+"""The pure parts of `mapctl demo` (mapbench.demo.scenario): which robots each peer imports."""
 
 from pathlib import Path
 
 import pytest
 
-from mapapi.demo import TUNNELS
-from mapapi.demo.scenario import DemoFailed, robot_files, share
+from mapbench.demo import TUNNELS
+from mapbench.demo.scenario import DemoFailed, robot_files, share
 
 
 def test_the_tunnels_robots_are_found_in_number_order(tmp_path: Path) -> None:

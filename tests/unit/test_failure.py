@@ -1,4 +1,4 @@
-"""The failure detector and the quorum rule (mapapi.failure, mapapi.quorum; issue 7 §1)."""
+"""The failure detector and the quorum rule (swarm/failure.py, swarm/quorum.py; issue 7 §1)."""
 
 import itertools
 
@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mapapi.failure import FailureDetector, Health, Transition
-from mapapi.ids import PeerId
-from mapapi.quorum import is_quorum
+from mapapi.core.ids import PeerId
+from mapapi.swarm.failure import FailureDetector, Health, Transition
+from mapapi.swarm.quorum import is_quorum
 
 A, B, C, D, E = (PeerId(f"{i:032x}") for i in range(1, 6))
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from mapapi.errors import RequestTimeout
+from mapapi.core.errors import RequestTimeout
 from mapapi.net.rpc import first_answer
 
 

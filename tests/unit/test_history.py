@@ -1,8 +1,8 @@
-"""Multi-version item history (mapapi.history, DESIGN §4)."""
+"""Multi-version item history (mapapi.core.history, DESIGN §4)."""
 
 import pytest
 
-from mapapi.history import (
+from mapapi.core.history import (
     CommitRecord,
     ItemHistory,
     Revision,
@@ -13,7 +13,7 @@ from mapapi.history import (
     revision_at,
     visible_at,
 )
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 
 ITEM = ItemId.new()
 CHUNK = ChunkId.new()

@@ -1,10 +1,10 @@
-"""Typed 128-bit ids and 160-bit ring keys (mapapi.ids)."""
+"""Typed 128-bit ids and 160-bit ring keys (mapapi.core.ids)."""
 
 import hashlib
 
 import pytest
 
-from mapapi.ids import ChunkId, CommitId, Id, ItemId, PeerId, ring_key
+from mapapi.core.ids import ChunkId, CommitId, Id, ItemId, PeerId, ring_key
 
 HEX = "0123456789abcdef0123456789abcdef"
 

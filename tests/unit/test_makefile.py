@@ -42,7 +42,7 @@ def pip_line(recipe: list[str]) -> str:
 class TestCheck:
     def test_check_runs_the_quick_folders_and_they_exist(self) -> None:
         folders = variable("CHECK_TESTS").split()
-        assert folders == ["tests/unit", "tests/property", "tests/cli"]
+        assert folders == ["tests/unit", "tests/property", "tests/cli", "tests/sim"]
         assert all((ROOT / f).is_dir() for f in folders)
         assert not {Path(f).name for f in folders} & SLOW_FOLDERS
         _, recipe = rule("check")

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from mapapi import Peer
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
 from mapapi.maps import CLOUDS, MISSIONS, MapImportError, PointCloud, import_cloud, load_cloud
 from mapapi.maps.cloud import (
     BLOCK_POINTS,
@@ -21,7 +22,6 @@ from mapapi.maps.cloud import (
     split_blocks,
 )
 from mapapi.maps.cloud_file import read_cloud, write_cloud
-from mapapi.spatial import BBox
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 ROOM = SAMPLES / "point_clouds" / "room_scan1.pcd"

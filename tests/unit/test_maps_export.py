@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from mapapi import Peer
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 from mapapi.maps import (
     EdgeKind,
     GraphEdge,
@@ -29,7 +29,7 @@ from mapapi.maps import (
 )
 from mapapi.maps.se3 import Pose
 from mapapi.maps.source import detect_format, read_source
-from mapapi.ops import OPERATIONS, Operations
+from mapapi.service.ops import OPERATIONS, Operations
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
@@ -251,8 +251,8 @@ class TestSources:
         )
 
     def test_commands_load_the_operations_without_numpy(self) -> None:
-        # every mapctl command imports mapapi.ops; numpy alone would add ~40 ms to each
-        code = "import sys, mapapi.ops; print({'numpy', 'open3d'} & set(sys.modules))"
+        # every mapctl command imports mapapi.service.ops; numpy alone would add ~40 ms to each
+        code = "import sys, mapapi.service.ops; print({'numpy', 'open3d'} & set(sys.modules))"
         ran = subprocess.run(
             [sys.executable, "-c", code], capture_output=True, text=True, check=True
         )

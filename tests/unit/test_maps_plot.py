@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
 from mapapi.maps import PointCloud, read_g2o, read_kimera, render3d
-from mapapi.maps.plot import choose_up, plane_axes, plot_map
-from mapapi.spatial import BBox
+from mapapi.maps.plot import plot_map
+from mapapi.maps.view_axes import choose_up, plane_axes
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 PNG = b"\x89PNG\r\n\x1a\n"

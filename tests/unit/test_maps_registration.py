@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from mapapi.errors import UsageError
+from mapapi.core.errors import UsageError
 from mapapi.maps.alignment import invert, matrix_pose, pose_matrix
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph
 from mapapi.maps.registration import (

@@ -26,7 +26,7 @@ from mapapi.maps import read_kimera
 from mapapi.maps.cloud_file import read_cloud
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.source import detect_format
-from mapapi.ops import Operations
+from mapapi.service.ops import Operations
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 G2O_FILES = sorted(SAMPLES.rglob("*.g2o"))

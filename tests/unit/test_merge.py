@@ -1,4 +1,4 @@
-"""Auto-merge policies for update/update conflicts (mapapi.merge, DESIGN §5 step 5)."""
+"""Auto-merge policies for update/update conflicts (mapapi.core.merge, DESIGN §5 step 5)."""
 
 from collections.abc import Awaitable, Callable
 from typing import Any
@@ -8,8 +8,8 @@ from google.protobuf import json_format, struct_pb2, wrappers_pb2
 from google.protobuf.message import Message
 
 from mapapi import ChunkId, ConflictError, ItemId, Peer, UsageError
-from mapapi.merge import disjoint_fields
-from mapapi.table import message_class
+from mapapi.core.merge import disjoint_fields
+from mapapi.core.table import message_class
 
 
 def struct(**fields: Any) -> struct_pb2.Struct:

@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import pytest
 
-from mapapi.raft import RaftNode, RaftOptions
-from mapapi.raft_types import (
+from mapapi.swarm.raft import RaftNode, RaftOptions
+from mapapi.swarm.raft_types import (
     NONE,
     ConfChange,
     ConfChangeKind,

@@ -1,4 +1,4 @@
-"""The repository on disk (mapapi.repo, DESIGN §9)."""
+"""The repository on disk (mapapi.service.repo, DESIGN §9)."""
 
 from collections.abc import Callable
 from pathlib import Path
@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from mapapi import AlreadyInitialisedError, CorruptRepoError, NotARepoError, Repository
-from mapapi.ids import PeerId
+from mapapi.core.ids import PeerId
 from mapapi.store import SqliteStore
 
 

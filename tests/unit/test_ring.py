@@ -1,4 +1,4 @@
-"""Chord id arithmetic (mapapi.dht.ring, DESIGN §7)."""
+"""Chord id arithmetic (mapapi.lookup.dht.ring, DESIGN §7)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import hashlib
 
 import pytest
 
-from mapapi.dht.ring import (
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.lookup.dht.ring import (
     RING_BITS,
     RING_SIZE,
     Hop,
@@ -20,7 +21,6 @@ from mapapi.dht.ring import (
     peer_key,
     responsible,
 )
-from mapapi.ids import ChunkId, PeerId
 
 TOP = RING_SIZE - 1
 

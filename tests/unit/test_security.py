@@ -9,9 +9,9 @@ import pytest
 import zmq
 from zmq.utils import z85
 
-from mapapi.errors import CorruptRepoError, UsageError
+from mapapi.core.errors import CorruptRepoError, UsageError
 from mapapi.net.curve import LinkWatch
-from mapapi.security import (
+from mapapi.net.security import (
     Security,
     TrustList,
     key_text,

@@ -1,4 +1,4 @@
-"""Spatial grid arithmetic (mapapi.spatial, DESIGN §7)."""
+"""Spatial grid arithmetic (mapapi.lookup.spatial, DESIGN §7)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from mapapi.errors import InvalidBBox, MapError, QueryError, UsageError
-from mapapi.spatial import (
+from mapapi.core.errors import InvalidBBox, MapError, QueryError, UsageError
+from mapapi.lookup.spatial import (
     DEFAULT_BOUNDS,
     DEFAULT_CELLS,
     MAX_CELLS,

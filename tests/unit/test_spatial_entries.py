@@ -1,5 +1,5 @@
-"""Spatial index entries and the "bbox" filter (mapapi.spatial_index), and where
-items lie by type (mapapi.extent): pure functions, no ring."""
+"""Spatial index entries and the "bbox" filter (mapapi.lookup.spatial_index), and where
+items lie by type (mapapi.lookup.extent): pure functions, no ring."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import pytest
 from google.protobuf import struct_pb2
 
 from mapapi._pb.mapapi.v1 import maps_pb2
-from mapapi.errors import InvalidBBox
-from mapapi.extent import extent_of, item_box
-from mapapi.ids import ChunkId, PeerId
-from mapapi.spatial import BBox
-from mapapi.spatial_index import SpatialRef, bbox_filter, encode_filter
+from mapapi.core.errors import InvalidBBox
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.lookup.extent import extent_of, item_box
+from mapapi.lookup.spatial import BBox
+from mapapi.lookup.spatial_index import SpatialRef, bbox_filter, encode_filter
 
 CHUNK = ChunkId("0123456789abcdef0123456789abcdef")
 HOLDER = (PeerId("fedcba9876543210fedcba9876543210"), "tcp://10.0.0.7:7000")

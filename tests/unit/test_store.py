@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from mapapi import ChunkNotFound, CorruptRepoError, UsageError
-from mapapi.history import CommitRecord, Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import ChunkInfo, MemoryStore, SqliteStore, Store
 
 AUTHOR = PeerId.new()

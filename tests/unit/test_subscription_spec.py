@@ -1,4 +1,4 @@
-"""Subscription specs (mapapi.subscriptions): parsing `--where`, the stored form,
+"""Subscription specs (mapapi.swarm.subscriptions): parsing `--where`, the stored form,
 and which revisions match, on pure data (no ring)."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import os
 import pytest
 from google.protobuf import struct_pb2
 
-from mapapi.errors import UsageError
-from mapapi.history import Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.spatial import BBox
-from mapapi.spatial_index import encode_filter
-from mapapi.subscriptions import SubscriptionSpec, parse_where, region_filter
-from mapapi.table import TableDescriptor
+from mapapi.core.errors import UsageError
+from mapapi.core.history import Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.table import TableDescriptor
+from mapapi.lookup.spatial import BBox
+from mapapi.lookup.spatial_index import encode_filter
+from mapapi.swarm.subscriptions import SubscriptionSpec, parse_where, region_filter
 
 ROOMS = TableDescriptor.named("rooms", "google.protobuf.Struct")
 ITEM = ItemId.new()

@@ -3,8 +3,8 @@
 import pytest
 
 from mapapi import ConflictError, Peer
+from mapapi.core.table import message_class
 from mapapi.sync import Blocking, wrap
-from mapapi.table import message_class
 
 Counter = message_class("mapapi.v1.Counter")
 

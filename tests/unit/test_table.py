@@ -1,4 +1,4 @@
-"""Tables: a name bound to a protobuf type, JSON in and out (mapapi.table)."""
+"""Tables: a name bound to a protobuf type, JSON in and out (mapapi.core.table)."""
 
 import json
 from typing import Any
@@ -7,7 +7,7 @@ import pytest
 from google.protobuf import struct_pb2, wrappers_pb2
 
 from mapapi import TableDescriptor, UsageError
-from mapapi.table import BUILTIN_TYPES, message_class
+from mapapi.core.table import BUILTIN_TYPES, message_class
 
 
 class TestMessageClass:

@@ -1,4 +1,4 @@
-"""Transactions (mapapi.transaction, DESIGN §5).
+"""Transactions (mapapi.core.transaction, DESIGN §5).
 
 The pure part (`validate`, `build_revisions`) is tested on hand-made revisions;
 the behaviour of a `Transaction` runs on a real peer, once on a `MemoryStore`
@@ -21,9 +21,9 @@ from mapapi import (
     UsageError,
     ViewClosedError,
 )
-from mapapi.history import Revision
-from mapapi.ids import CommitId, PeerId
-from mapapi.transaction import (
+from mapapi.core.history import Revision
+from mapapi.core.ids import CommitId, PeerId
+from mapapi.core.transaction import (
     Change,
     Op,
     Transaction,

@@ -1,14 +1,14 @@
-"""The pure rules of `resolve` (`mapapi.view`): what settles a conflict, and
+"""The pure rules of `resolve` (`mapapi.core.view`): what settles a conflict, and
 when that would discard an edit the view staged after the conflict."""
 
 from __future__ import annotations
 
 import pytest
 
-from mapapi.history import Revision
-from mapapi.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.transaction import Change, Conflict, Op
-from mapapi.view import View, discards, mapctl_in, settle
+from mapapi.core.history import Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.transaction import Change, Conflict, Op
+from mapapi.core.view import View, discards, mapctl_in, settle
 
 CHUNK = ChunkId.new()
 ITEM = ItemId.new()

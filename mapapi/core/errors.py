@@ -1,0 +1,324 @@
+"""The exception hierarchy (STYLE §4).
+
+Every error mapapi raises on purpose is a `MapError`. `retriable` tells retry
+loops whether the same call may succeed later; `code` travels in error replies
+and picks the CLI's exit status through `exit_code`.
+
+Network errors (exit 5) end their message with `advice`: what a person should
+do next, which always begins with one of three verbs (`ADVICE_VERBS`):
+
+- "retry now": transient, the same call is likely to succeed at once;
+- "wait": a peer is restarting, being evicted or links are settling; the advice
+  says roughly how long before retrying;
+- "act": retrying cannot help until someone runs what the advice names.
+
+A class gives the usual advice; a raise site that knows better passes its own
+(`advice=`). The advice is part of the message, so it survives the trip from a
+peer daemon to `mapctl` as an `ErrorReply`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, ClassVar
+
+if TYPE_CHECKING:
+    from mapapi.core.transaction import Conflict, Transaction
+
+
+ADVICE_VERBS = ("retry now", "wait", "act")
+
+# Seconds before a silent peer is declared dead and evicted by its co-holders
+# (mapapi.swarm.failure.DEAD_AFTER, 3 s), plus a round of the heartbeat: the "wait"
+# advice quotes it so people know how long "a moment" is.
+SETTLE_S = 5
+
+
+class MapError(Exception):
+    """Base for every error mapapi raises on purpose.
+
+    Args:
+        message: what failed.
+        advice: what to do next, appended to the message after "; ". None
+            takes the class's `advice` (empty for most errors, whose
+            messages say it themselves).
+    """
+
+    retriable: ClassVar[bool] = False
+    code: ClassVar[int] = 1
+    exit_code: ClassVar[int] = 1
+    advice: str = ""
+
+    def __init__(self, message: str = "", *, advice: str | None = None) -> None:
+        if advice is not None:
+            self.advice = advice
+        if self.advice and not message.endswith(self.advice):
+            message = f"{message}; {self.advice}" if message else self.advice
+        super().__init__(message)
+
+
+class UsageError(MapError, ValueError):
+    """The caller asked for something malformed (bad JSON, unknown table, ...)."""
+
+    code = 2
+    exit_code = 2
+
+
+class LimitExceeded(UsageError):
+    """A message or value exceeds one of the limits in `mapapi.core.limits` (its
+    message names the limit); refused before anything is allocated for it."""
+
+    code = 3
+
+
+class RepoError(MapError):
+    """A problem with the on-disk repository."""
+
+    code = 10
+
+
+class NotARepoError(RepoError):
+    """No `.mapapi` folder here or in any parent."""
+
+    code = 11
+    exit_code = 4
+
+
+class AlreadyInitialisedError(RepoError):
+    """`init` on a folder that already holds a repository."""
+
+    code = 12
+
+
+class CorruptRepoError(RepoError):
+    """The repository's files are damaged or are not a mapapi repository."""
+
+    code = 13
+
+
+class NotOwner(RepoError):
+    """A call reached a peer daemon's control endpoint without the owner's token
+    (`.mapapi/service/control.token`, readable only by the user who runs the daemon)."""
+
+    code = 14
+
+
+class ChunkError(MapError):
+    """A problem with a chunk."""
+
+    code = 15
+
+
+class ChunkNotFound(ChunkError):
+    """No chunk with that id is known here."""
+
+    code = 16
+
+
+class ItemNotFound(MapError):
+    """No item with that id exists at the time read."""
+
+    code = 17
+
+
+class NotParticipatingError(ChunkError):
+    """This peer does not hold the chunk."""
+
+    code = 18
+
+
+class TransactionError(MapError):
+    """A problem with a transaction or view."""
+
+    code = 20
+
+
+class ConflictError(TransactionError):
+    """The commit lost a race: items it changed were changed by someone else.
+
+    Attributes:
+        conflicts: one `Conflict` (base, ours, theirs) per conflicting item.
+        resolved_at: the time the conflicts were seen; `merge()` begins there.
+    """
+
+    retriable = True
+    code = 21
+    exit_code = 3
+
+    def __init__(
+        self, conflicts: list[Conflict], transaction: Transaction, resolved_at: int
+    ) -> None:
+        self.conflicts = conflicts
+        self.resolved_at = resolved_at
+        self._transaction = transaction
+        super().__init__(self._hint("mapctl"))
+
+    def _hint(self, mapctl: str) -> str:
+        return (
+            f"{len(self.conflicts)} conflicting item(s); run `{mapctl} diff` and "
+            f"`{mapctl} resolve`, then commit again"
+        )
+
+    def name_view(self, mapctl: str) -> None:
+        """Point the hint at one view's commands, `mapctl` being the command
+        line that reaches it (say `mapctl --view bob`)."""
+        self.args = (self._hint(mapctl),)
+
+    def merge(self) -> Transaction:
+        """A new transaction, begun when the conflicts were seen, holding every
+        change of the failed one that did not conflict (git-like)."""
+        return self._transaction.merged(self)
+
+
+class ViewClosedError(TransactionError):
+    """The transaction or view is not in a state that allows this."""
+
+    code = 22
+
+
+class UnresolvedConflicts(TransactionError):
+    """A view still holds conflicts, so it cannot commit."""
+
+    code = 23
+    exit_code = 3
+
+
+class LockError(MapError):
+    """A problem with a chunk lock."""
+
+    code = 30
+
+
+class LockTimeout(LockError):
+    """A lock was not granted in time."""
+
+    retriable = True
+    code = 31
+
+
+class LockNotHeld(LockError):
+    """A commit or unlock came from a writer without the current lease (stale token)."""
+
+    code = 32
+
+
+class NetworkError(MapError):
+    """A message could not be delivered or answered."""
+
+    retriable = True
+    code = 40
+    exit_code = 5
+    advice = "retry now; if it fails again, see who answers with `mapctl peers`"
+
+
+class PeerUnavailable(NetworkError):
+    """The peer cannot be reached, or the local transport closed before it answered."""
+
+    retriable = True
+    code = 41
+    advice = (
+        f"wait about {SETTLE_S} s and retry: the peer may be restarting, and a peer silent "
+        "for 3 s is evicted so the others go on; if it persists, check `mapctl peers`"
+    )
+
+
+class RequestTimeout(NetworkError):
+    """A request got no reply before its deadline."""
+
+    retriable = True
+    code = 42
+    advice = (
+        "retry now (a reply can be lost on a busy link); if it times out again, wait "
+        f"about {SETTLE_S} s for the peer to restart or be evicted, then check `mapctl peers`"
+    )
+
+
+class ProtocolError(NetworkError):
+    """A message was malformed, truncated, unknown or oversized (DESIGN §11)."""
+
+    retriable = False
+    code = 43
+    advice = (
+        "act: run one mapapi version on every peer (`mapctl --version`); retrying will not help"
+    )
+
+
+class DaemonDied(PeerUnavailable):
+    """The peer daemon died (a crash, `kill -9`) while it ran an operation for this
+    client: whether the operation took effect is unknown until it runs again."""
+
+    retriable = False
+    code = 45
+    advice = (
+        "act: start the peer again (`mapctl peer start --detach`), check with `mapctl log` "
+        "whether the operation took effect, and run it again if not"
+    )
+
+
+class CommitUncertain(NetworkError):
+    """A commit was applied at its writer, but too few holders confirmed it to
+    know that it lasts: if the writer is cut off from the others, they decide
+    when they evict it (see docs/guarantees.md, Failures)."""
+
+    retriable = False
+    code = 44
+    advice = (
+        f"wait about {SETTLE_S} s for the holders to settle, then check with `mapctl log` "
+        "that the commit is there; do not commit it again before"
+    )
+
+
+class AccessRefused(NetworkError):
+    """A secure link was refused (DESIGN §10): a peer does not trust the other's
+    key, or one peer is secure and the other open. Not retriable: trust must change
+    first (`mapctl trust add`)."""
+
+    retriable = False
+    code = 49
+    advice = "act: change the trust lists (`mapctl trust add KEY`, `mapctl key show`)"
+
+
+class SwarmError(MapError):
+    """A problem with swarm membership."""
+
+    code = 50
+    exit_code = 5
+
+
+class JoinRefused(SwarmError):
+    """A peer refused to let this one join (or is not a mapapi peer)."""
+
+    code = 51
+
+
+class NoPeersError(SwarmError):
+    """This peer knows no other peer to ask."""
+
+    retriable = True
+    code = 52
+
+
+class PeerNotRunning(SwarmError):
+    """The command needs the repository's peer daemon, and none runs."""
+
+    code = 53
+
+
+class QueryError(MapError):
+    """A lookup or spatial query could not be answered as asked."""
+
+    code = 60
+    exit_code = 2
+
+
+class WatchTimeout(QueryError):
+    """`mapctl watch --timeout` ran out before the changes it waited for arrived."""
+
+    code = 62
+    exit_code = 1
+
+
+class InvalidBBox(QueryError, ValueError):
+    """A bounding box is malformed: min > max, or a coordinate is NaN or infinite."""
+
+    code = 61
+    exit_code = 2

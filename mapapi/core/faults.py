@@ -1,0 +1,86 @@
+"""Fault injection points, for the failure tests and the soak bench (issue 7).
+
+A few places of the commit protocol call `await reached("name")`. Nothing
+happens there unless a test armed the point: in-process with `arm`, or in a
+peer daemon through the environment, `MAPAPI_FAULTS="commit.staged=pause"`
+(comma-separated). A daemon's actions are:
+
+- ``pause``: log ``fault point NAME reached`` and wait for ever, so that a test
+  can `kill -9` the process at exactly that moment of a commit;
+- ``crash``: kill the process with SIGKILL on the spot.
+
+The points: ``commit.staged`` (every holder staged the batches; nothing is
+applied anywhere) and ``commit.applied`` (applied at the writer only).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import logging
+import os
+import signal
+from collections.abc import Awaitable, Callable, Mapping
+
+from mapapi.core.errors import UsageError
+
+log = logging.getLogger(__name__)
+
+POINTS = ("commit.staged", "commit.applied")
+ENV = "MAPAPI_FAULTS"
+
+Action = Callable[[], Awaitable[None]]
+_armed: dict[str, Action] = {}
+
+
+async def reached(point: str) -> None:
+    """Run the action armed at `point`, if any (normally none)."""
+    action = _armed.get(point)
+    if action is not None:
+        await action()
+
+
+def arm(point: str, action: Action) -> None:
+    """Run `action` whenever `point` is reached (until `disarm`).
+
+    Raises:
+        UsageError: no such point.
+    """
+    if point not in POINTS:
+        raise UsageError(f"no fault point {point!r}; the points are {', '.join(POINTS)}")
+    _armed[point] = action
+
+
+def disarm(point: str | None = None) -> None:
+    """Disarm `point`, or every point."""
+    if point is None:
+        _armed.clear()
+    else:
+        _armed.pop(point, None)
+
+
+async def _pause(point: str) -> None:
+    log.warning("fault point %s reached; pausing until killed", point)
+    await asyncio.Event().wait()
+
+
+async def _crash(point: str) -> None:
+    log.warning("fault point %s reached; crashing", point)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+_ACTIONS = {"pause": _pause, "crash": _crash}
+
+
+def arm_from_env(environ: Mapping[str, str]) -> None:
+    """Arm the points `MAPAPI_FAULTS` names, e.g. ``commit.staged=pause``.
+
+    Raises:
+        UsageError: a malformed entry, an unknown point or action.
+    """
+    for entry in filter(None, (e.strip() for e in environ.get(ENV, "").split(","))):
+        point, _, name = entry.partition("=")
+        action = _ACTIONS.get(name)
+        if action is None:
+            raise UsageError(f"{ENV}: {entry!r} is not POINT=pause or POINT=crash")
+        arm(point, functools.partial(action, point))

@@ -1,0 +1,474 @@
+"""Transactions: views at a begin time with optimistic commits (DESIGN §5).
+
+A `Transaction` reads the map as it was at its begin time, buffers its own
+changes (which its reads see), and commits them atomically through its
+backend. Validation itself is the pure function `validate`: an updated or
+removed item conflicts if someone else wrote it after the begin time (or after
+this transaction's own earlier commit of it); an insert conflicts if the id
+exists; with `isolation="serializable"` the read set is validated too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+from enum import Enum
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+from mapapi.core.errors import ConflictError, ItemNotFound, UsageError, ViewClosedError
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+
+if TYPE_CHECKING:
+    from google.protobuf.message import Message
+
+    from mapapi.core.table import TableDescriptor
+
+Isolation = Literal["snapshot", "serializable"]
+ISOLATIONS: tuple[Isolation, ...] = ("snapshot", "serializable")
+
+
+class Op(Enum):
+    """What a buffered change does to its item."""
+
+    INSERT = 1
+    UPDATE = 2
+    REMOVE = 3
+
+
+@dataclass(frozen=True, slots=True)
+class Change:
+    """One buffered change; `data` is the serialized payload (empty for REMOVE)."""
+
+    op: Op
+    table: str
+    item_id: ItemId
+    chunk_id: ChunkId
+    data: bytes = b""
+
+
+@dataclass(frozen=True, slots=True)
+class Conflict:
+    """An item someone else changed after our begin time.
+
+    Attributes:
+        base: the item at our begin time (None if it did not exist).
+        ours: our change (None when only read, under serializable isolation).
+        theirs: the newest revision, written by the other side.
+    """
+
+    table: str
+    item_id: ItemId
+    chunk_id: ChunkId
+    base: Revision | None
+    ours: Change | None
+    theirs: Revision
+
+
+# Given our change, their newest revision and the base, return the merged
+# payload, or None when the table's policy cannot merge them.
+MergeFn = Callable[[Change, Revision, Revision | None], bytes | None]
+
+
+def validate(
+    changes: Iterable[Change],
+    latest: Mapping[ItemId, Revision],
+    since: Callable[[ItemId], int],
+    *,
+    read_set: Iterable[ItemId] = (),
+    try_merge: MergeFn | None = None,
+    base_of: Callable[[ItemId], Revision | None] = lambda _: None,
+) -> tuple[list[Change], list[Conflict]]:
+    """Decide a commit on the current replica (pure).
+
+    Args:
+        changes: the write set.
+        latest: the newest revision of every item in the write and read sets.
+        since: per item, the time after which a foreign write is a conflict
+            (the begin time, or this transaction's own last commit of the item).
+        read_set: items read but not written (serializable isolation only).
+        try_merge: the table's auto-merge hook for update/update conflicts.
+        base_of: the item at the begin time, for conflict reports.
+
+    Returns:
+        The changes to write (merged where a policy merged them) and the conflicts.
+    """
+    accepted: list[Change] = []
+    conflicts: list[Conflict] = []
+    written: set[ItemId] = set()
+    for change in changes:
+        written.add(change.item_id)
+        theirs = latest.get(change.item_id)
+        if change.op is Op.INSERT:
+            # A tombstone we already saw (before our begin, or our own removal)
+            # does not make the id "exist": re-inserting it is no conflict.
+            if theirs is None or (theirs.removed and theirs.update_time <= since(change.item_id)):
+                accepted.append(change)
+            else:
+                conflicts.append(_conflict(change.item_id, change, theirs, base_of))
+            continue
+        if theirs is None or theirs.update_time <= since(change.item_id):
+            accepted.append(change)
+            continue
+        if change.op is Op.UPDATE and not theirs.removed and try_merge is not None:
+            merged = try_merge(change, theirs, base_of(change.item_id))
+            if merged is not None:
+                accepted.append(replace(change, data=merged))
+                continue
+        conflicts.append(_conflict(change.item_id, change, theirs, base_of))
+    for item_id in read_set:
+        theirs = latest.get(item_id)
+        if item_id in written or theirs is None:
+            continue
+        if theirs.update_time > since(item_id):
+            conflicts.append(_conflict(item_id, None, theirs, base_of))
+    return accepted, conflicts
+
+
+def _conflict(
+    item_id: ItemId,
+    ours: Change | None,
+    theirs: Revision,
+    base_of: Callable[[ItemId], Revision | None],
+) -> Conflict:
+    base = base_of(item_id)
+    if base is not None and base.removed:
+        base = None
+    return Conflict(theirs.table, item_id, theirs.chunk_id, base, ours, theirs)
+
+
+def build_revisions(
+    changes: Iterable[Change],
+    latest: Mapping[ItemId, Revision],
+    time: int,
+    author: PeerId,
+    commit_id: CommitId,
+) -> list[Revision]:
+    """Stamp accepted changes as revisions of one commit (pure)."""
+    out = []
+    for change in changes:
+        previous = latest.get(change.item_id)
+        inserted = time if change.op is Op.INSERT or previous is None else previous.insert_time
+        out.append(
+            Revision(
+                change.item_id,
+                change.table,
+                change.chunk_id,
+                b"" if change.op is Op.REMOVE else change.data,
+                inserted,
+                time,
+                change.op is Op.REMOVE,
+                author,
+                commit_id,
+            )
+        )
+    return out
+
+
+class TransactionBackend(Protocol):
+    """What a transaction needs from the peer it runs on."""
+
+    def table(self, name: str) -> TableDescriptor:
+        """The descriptor of a table; raises UsageError if unknown."""
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        """The table a chunk belongs to; raises ChunkNotFound."""
+
+    def read_local(self, item_id: ItemId, time: int) -> Revision | None:
+        """The newest local revision at or before `time` (no network)."""
+
+    async def read(self, item_id: ItemId, time: int) -> Revision | None:
+        """Like `read_local`, fetching the item's chunk first where needed."""
+
+    async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
+        """Items visible at `time` in a table or one of its chunks."""
+
+    async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
+        """Validate and apply `tx`'s changes; raises ConflictError."""
+
+    @property
+    def name(self) -> str:
+        """The peer's name (`init --name`), stamped on its commits."""
+
+
+class ViewState(Enum):
+    """Where a transaction is in its life."""
+
+    OPEN = 1
+    VALIDATING = 2
+    CONFLICTED = 3
+    ABORTED = 4
+
+
+_ALLOWED = {
+    ViewState.OPEN: {ViewState.VALIDATING, ViewState.ABORTED},
+    ViewState.VALIDATING: {ViewState.OPEN, ViewState.CONFLICTED},
+    ViewState.CONFLICTED: {ViewState.ABORTED},
+}
+
+
+class Transaction:
+    """A view of the map at `begin_time` plus buffered changes.
+
+    Reads are coroutines because reading a chunk this peer does not hold
+    fetches it first; writes only buffer. `commit()` may be called more than
+    once: the begin time stays, and the transaction's own earlier commits are
+    never conflicts for it (multi-commit).
+    """
+
+    def __init__(
+        self,
+        backend: TransactionBackend,
+        begin_time: int,
+        author: PeerId,
+        *,
+        isolation: Isolation = "snapshot",
+        view: str = "",
+    ) -> None:
+        if isolation not in ISOLATIONS:
+            raise UsageError(f"isolation must be one of {ISOLATIONS}, not {isolation!r}")
+        self._backend = backend
+        self.begin_time = begin_time
+        self.author = author
+        self.author_name = backend.name
+        self.view = view  # the named view this transaction stands for, if any
+        self.isolation: Isolation = isolation
+        self.state = ViewState.OPEN
+        self._changes: dict[ItemId, Change] = {}
+        self._own: dict[ItemId, Revision] = {}  # revisions of our earlier commits
+        self._read_set: set[ItemId] = set()
+        self._scopes: set[tuple[str, ChunkId | None]] = set()
+
+    # -- state -------------------------------------------------------------
+    def _transition_to(self, target: ViewState) -> None:
+        if target not in _ALLOWED.get(self.state, set()):
+            raise ViewClosedError(
+                f"transaction cannot go {self.state.name} -> {target.name}"
+                + ("; use err.merge() for a new one" if self.state is ViewState.CONFLICTED else "")
+            )
+        self.state = target
+
+    def _check_open(self) -> None:
+        if self.state is not ViewState.OPEN:
+            raise ViewClosedError(f"transaction is {self.state.name}, not OPEN")
+
+    @property
+    def changes(self) -> list[Change]:
+        """The buffered changes, in the order first made."""
+        return list(self._changes.values())
+
+    @property
+    def read_set(self) -> set[ItemId]:
+        """Items read by `get` (validated under serializable isolation)."""
+        return set(self._read_set)
+
+    @property
+    def scopes(self) -> set[tuple[str, ChunkId | None]]:
+        """(table, chunk or None) ranges scanned by `items`/`find`."""
+        return set(self._scopes)
+
+    def note_reads(
+        self, read_set: Iterable[ItemId], scopes: Iterable[tuple[str, ChunkId | None]]
+    ) -> None:
+        """Count reads made elsewhere (an earlier command of a CLI view) as ours."""
+        self._read_set.update(read_set)
+        self._scopes.update(scopes)
+
+    def since(self, item_id: ItemId) -> int:
+        """The time after which a foreign write to `item_id` conflicts with us."""
+        own = self._own.get(item_id)
+        return own.update_time if own is not None else self.begin_time
+
+    # -- reads ---------------------------------------------------------------
+    def _overlay(self, item_id: ItemId) -> tuple[bool, bytes | None]:
+        """(known, data) from our own buffer or earlier commits."""
+        change = self._changes.get(item_id)
+        if change is not None:
+            return True, None if change.op is Op.REMOVE else change.data
+        own = self._own.get(item_id)
+        if own is not None:
+            return True, None if own.removed else own.data
+        return False, None
+
+    async def get(self, table: str, item_id: ItemId) -> Message | None:
+        """The item as this transaction sees it, or None if absent or removed."""
+        descriptor = self._backend.table(table)
+        self._read_set.add(item_id)
+        known, data = self._overlay(item_id)
+        if not known:
+            revision = await self._backend.read(item_id, self.begin_time)
+            if revision is None or revision.removed:
+                return None
+            if revision.table != table:
+                raise UsageError(
+                    f"item {item_id} belongs to table {revision.table!r}, not {table!r}"
+                )
+            data = revision.data
+        return None if data is None else descriptor.decode(data)
+
+    async def items(self, table: str, chunk: ChunkId | None = None) -> dict[ItemId, Message]:
+        """Every item of a table (or one of its chunks) this transaction sees."""
+        descriptor = self._backend.table(table)
+        if chunk is not None and self._backend.chunk_table(chunk) != table:
+            raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
+        self._scopes.add((table, chunk))
+        found: dict[ItemId, bytes] = {
+            r.item_id: r.data for r in await self._backend.scan(self.begin_time, table, chunk)
+        }
+        overlay: list[tuple[ItemId, str, ChunkId, bytes | None]] = [
+            (i, r.table, r.chunk_id, None if r.removed else r.data) for i, r in self._own.items()
+        ] + [
+            (i, c.table, c.chunk_id, None if c.op is Op.REMOVE else c.data)
+            for i, c in self._changes.items()
+        ]
+        for item_id, item_table, item_chunk, data in overlay:
+            if item_table != table or (chunk is not None and item_chunk != chunk):
+                continue
+            if data is None:
+                found.pop(item_id, None)
+            else:
+                found[item_id] = data
+        return {i: descriptor.decode(d) for i, d in sorted(found.items())}
+
+    async def find(
+        self, table: str, field: str, value: Any, chunk: ChunkId | None = None
+    ) -> dict[ItemId, Message]:
+        """Items whose `field` equals `value` (compared in the JSON mapping)."""
+        descriptor = self._backend.table(table)
+        wanted = descriptor.canonical_json(value)
+        return {
+            i: m
+            for i, m in (await self.items(table, chunk)).items()
+            if descriptor.field_json(m, field) == wanted
+        }
+
+    # -- writes --------------------------------------------------------------
+    def _current_chunk(self, table: str, item_id: ItemId) -> ChunkId:
+        """The chunk of an item this transaction sees; raises ItemNotFound."""
+        change = self._changes.get(item_id)
+        if change is not None and change.op is not Op.REMOVE:
+            return change.chunk_id
+        if change is None:
+            own = self._own.get(item_id)
+            revision = own or self._backend.read_local(item_id, self.begin_time)
+            if revision is not None and not revision.removed:
+                if revision.table != table:
+                    raise UsageError(
+                        f"item {item_id} belongs to table {revision.table!r}, not {table!r}"
+                    )
+                return revision.chunk_id
+        raise ItemNotFound(f"no item {item_id} in table {table!r} at time {self.begin_time}")
+
+    def _insertable(self, table: str, chunk: ChunkId) -> TableDescriptor:
+        """The table's descriptor, once the transaction is open and `chunk` is `table`'s."""
+        self._check_open()
+        descriptor = self._backend.table(table)
+        if self._backend.chunk_table(chunk) != table:
+            raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
+        return descriptor
+
+    def insert(
+        self, table: str, message: Message, chunk: ChunkId, item_id: ItemId | None = None
+    ) -> ItemId:
+        """Buffer a new item in `chunk`; returns its (new random) id."""
+        descriptor = self._insertable(table, chunk)
+        item_id = item_id or ItemId.new()
+        if item_id in self._changes:
+            raise UsageError(f"item {item_id} is already changed in this transaction")
+        self._changes[item_id] = Change(
+            Op.INSERT, table, item_id, chunk, descriptor.encode(message)
+        )
+        return item_id
+
+    def insert_many(self, table: str, messages: Iterable[Message], chunk: ChunkId) -> list[ItemId]:
+        """Buffer new items in `chunk` (checked once, not per item, which is what
+        makes bulk imports fast); returns their new random ids."""
+        descriptor = self._insertable(table, chunk)
+        ids = []
+        for message in messages:
+            item_id = ItemId.new()
+            self._changes[item_id] = Change(
+                Op.INSERT, table, item_id, chunk, descriptor.encode(message)
+            )
+            ids.append(item_id)
+        return ids
+
+    def update(self, table: str, item_id: ItemId, message: Message) -> None:
+        """Buffer a new version of an existing item."""
+        self._check_open()
+        data = self._backend.table(table).encode(message)
+        chunk = self._current_chunk(table, item_id)
+        previous = self._changes.get(item_id)
+        op = Op.INSERT if previous is not None and previous.op is Op.INSERT else Op.UPDATE
+        self._changes[item_id] = Change(op, table, item_id, chunk, data)
+
+    def remove(self, table: str, item_id: ItemId) -> None:
+        """Buffer the removal of an item (a tombstone revision at commit)."""
+        self._check_open()
+        chunk = self._current_chunk(table, item_id)
+        previous = self._changes.get(item_id)
+        if previous is not None and previous.op is Op.INSERT:
+            del self._changes[item_id]  # inserted and removed: nothing to write
+            return
+        self._changes[item_id] = Change(Op.REMOVE, table, item_id, chunk)
+
+    def stage(self, change: Change) -> None:
+        """Buffer a prepared change as is (used to re-apply our side of a conflict)."""
+        self._check_open()
+        self._backend.table(change.table)
+        self._changes[change.item_id] = change
+
+    def unstage(self, item_id: ItemId) -> None:
+        """Drop the buffered change of one item."""
+        self._check_open()
+        self._changes.pop(item_id, None)
+
+    # -- commit ----------------------------------------------------------------
+    async def commit(self, message: str = "") -> CommitRecord | None:
+        """Validate and apply the buffered changes atomically.
+
+        Returns:
+            The commit record, or None when there was nothing to write (a
+            serializable transaction still validates its reads then).
+
+        Raises:
+            ConflictError: someone changed an item of the write set (or, under
+                serializable isolation, the read set) since the begin time; the
+                transaction is CONFLICTED and `err.merge()` continues.
+        """
+        self._transition_to(ViewState.VALIDATING)
+        try:
+            record = await self._backend.commit_transaction(self, message)
+        except ConflictError:
+            self.state = ViewState.CONFLICTED
+            raise
+        except BaseException:
+            self.state = ViewState.OPEN  # e.g. a lock timeout: the caller may retry
+            raise
+        self.state = ViewState.OPEN
+        return record
+
+    def committed(self, revisions: Iterable[Revision]) -> None:
+        """Called by the backend once `revisions` are applied: clear the buffer
+        and remember them so later reads and commits of this transaction see them."""
+        for revision in revisions:
+            self._own[revision.item_id] = revision
+        self._changes.clear()
+
+    def abort(self) -> None:
+        """Drop the buffered changes; the transaction cannot be used again."""
+        self._transition_to(ViewState.ABORTED)
+        self._changes.clear()
+
+    def merged(self, error: ConflictError) -> Transaction:
+        """See `ConflictError.merge`."""
+        tx = Transaction(
+            self._backend, error.resolved_at, self.author, isolation=self.isolation, view=self.view
+        )
+        conflicting = {c.item_id for c in error.conflicts}
+        for item_id, change in self._changes.items():
+            if item_id not in conflicting:
+                tx._changes[item_id] = change
+        if self.state is ViewState.CONFLICTED:
+            self._transition_to(ViewState.ABORTED)
+        return tx

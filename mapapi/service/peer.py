@@ -1,0 +1,520 @@
+"""`Peer`: the async public facade; composes the store, clock, commit path and swarm.
+
+A peer works alone on its repository until `start()` puts it on the network
+(`Swarm`); from then on every commit goes through the distributed lock and
+reaches every holder. It holds no protocol logic of its own and delegates to
+`commit`, `transaction`, `swarm` and the store.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from mapapi.core.clock import LamportClock
+from mapapi.core.errors import ChunkNotFound, NotParticipatingError, PeerNotRunning, UsageError
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.table import TableDescriptor
+from mapapi.core.transaction import Change, Isolation, Transaction
+from mapapi.lookup.chunk_places import ChunkPlaces
+from mapapi.lookup.spatial import BBox, SpatialGrid
+from mapapi.lookup.spatial_index import QueryStats, SpatialRef
+from mapapi.service.repo import Repository
+from mapapi.store import ChunkInfo, MemoryStore
+from mapapi.store.base import ReplicaStore
+from mapapi.swarm.commit import commit_distributed, commit_locally
+from mapapi.swarm.triggers import Callback, Triggers
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from google.protobuf.message import Message
+
+    from mapapi.core.merge import MergePolicy
+    from mapapi.net.messages import ChunkSummary, Member
+    from mapapi.net.security import Security
+    from mapapi.net.shaping import Shaper
+    from mapapi.swarm.commit_check import CommitRule
+    from mapapi.swarm.liveness import LivenessOptions
+    from mapapi.swarm.membership import MemberState
+    from mapapi.swarm.node import ChordOptions, Swarm
+    from mapapi.swarm.replication import Progress
+    from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class PlacedChunk:
+    """A chunk a spatial query found: where it lies, who holds it, and whether
+    this peer does."""
+
+    ref: SpatialRef
+    holders: tuple[Member, ...]
+    held: bool
+
+
+def _standard_rules() -> tuple[CommitRule, ...]:
+    """The rules of the tables mapapi ships, the map tables' (a vertex index is
+    unique in its mission, an edge's ends exist). Imported here, not at the top:
+    the application layer sits above the peer and gives them at construction."""
+    from mapapi.maps.rules import map_rules
+
+    return map_rules()
+
+
+class Peer:
+    """One peer and its local map repository.
+
+    Args:
+        rules: what every commit of this peer must keep (`CommitRule`); by
+            default the map tables' rules, `()` for none.
+    """
+
+    def __init__(
+        self,
+        store: ReplicaStore,
+        peer_id: PeerId | None = None,
+        *,
+        name: str = "",
+        grid: SpatialGrid | None = None,
+        security: Security | None = None,
+        rules: Sequence[CommitRule] | None = None,
+    ) -> None:
+        self.store = store
+        # checked by every commit this peer writes; by default the map tables' rules
+        self.rules = tuple(_standard_rules() if rules is None else rules)
+        self.security = security
+        self.id = peer_id or PeerId.new()
+        self.name = name or self.id.short
+        self.grid = grid or SpatialGrid()
+        self.places = ChunkPlaces(store)
+        self.triggers = Triggers()
+        self.clock = LamportClock(store.clock())
+        self.swarm: Swarm | None = None
+        self._descriptors: dict[str, TableDescriptor] = {}
+        self._policies: dict[str, MergePolicy] = {}
+
+    @classmethod
+    def open(cls, path: str | Path = ".") -> Peer:
+        """The peer of the repository at (or above) `path`."""
+        return cls.of(Repository.find(path))
+
+    @classmethod
+    def of(cls, repo: Repository) -> Peer:
+        """The peer of `repo`: its store, identity, spatial index geometry and,
+        for a secure repository, its keys and trust list (DESIGN §10)."""
+        config = repo.config
+        security = repo.security()
+        return cls(
+            repo.open_store(),
+            config.peer_id,
+            name=config.name,
+            grid=config.spatial,
+            security=security,
+        )
+
+    @classmethod
+    def in_memory(cls) -> Peer:
+        """A scratch peer on a `MemoryStore`."""
+        return cls(MemoryStore())
+
+    async def close(self) -> None:
+        """Leave the swarm gracefully (if on one) and release the store.
+
+        The peer leaves the holder sets of the chunks it shares, keeping its
+        replicas, so the others go on committing; `rejoin()` after the next
+        `start()` and `join()` makes it a holder again.
+        """
+        if self.swarm is not None:
+            try:
+                async with asyncio.timeout(self.swarm.locks.lock_timeout):
+                    await self.swarm.replicator.detach_all()
+            except TimeoutError:
+                log.warning("stopping without leaving every shared chunk (holders unreachable)")
+            await self.swarm.leave()
+            await self.swarm.close()
+            self.swarm = None
+        await self.triggers.close()
+        self.store.close()
+
+    # -- the swarm -----------------------------------------------------------------
+    async def start(
+        self,
+        listen: str = "tcp://127.0.0.1:0",
+        *,
+        lease: float = 5.0,
+        shaper: Shaper | None = None,
+        chord: ChordOptions | None = None,
+        liveness: LivenessOptions | None = None,
+    ) -> str:
+        """Put this peer on the network; returns the address others join through.
+
+        Args:
+            listen: a zmq endpoint; port 0 picks a free port.
+            lease: seconds a write lock lasts unless renewed.
+            shaper: simulated latency and bandwidth per link, for experiments.
+            chord: periods and timeouts of the lookup ring and the time-to-live
+                of holder registrations (`mapapi.swarm.node.ChordOptions`; the
+                defaults suit robots on a wireless network).
+            liveness: heartbeat period and the silences after which a peer is
+                suspected and declared dead (`mapapi.swarm.liveness.LivenessOptions`).
+        """
+        from mapapi.swarm.node import Swarm  # the network stack loads only when needed
+
+        if self.swarm is not None:
+            raise UsageError(f"peer already listens on {self.swarm.address}")
+        swarm = Swarm(
+            self.id,
+            self.name,
+            self.store,
+            self.clock,
+            lease=lease,
+            shaper=shaper,
+            chord=chord,
+            places=self.places,
+            grid=self.grid,
+            liveness=liveness,
+            security=self.security,
+        )
+        address = await swarm.start(listen)
+        swarm.replicator.applied_hooks.append(self.triggers.applied)
+        self.swarm = swarm
+        return address
+
+    def _on_swarm(self) -> Swarm:
+        if self.swarm is None:
+            raise UsageError("this peer is not on the network; start it first")
+        return self.swarm
+
+    @property
+    def address(self) -> str:
+        """The address other peers join through."""
+        return self._on_swarm().address
+
+    async def join(self, seed: str) -> list[Member]:
+        """Join the swarm through the member listening at `seed`; returns every member.
+
+        A peer that shared chunks before it stopped holds them again (`rejoin`).
+        """
+        members = await self._on_swarm().join(seed)
+        await self.rejoin()
+        return members
+
+    async def rejoin(self) -> list[ChunkId]:
+        """Hold again the chunks this peer shared before it stopped, catching up on
+        what the others committed meanwhile; returns those chunks."""
+        return await self._on_swarm().replicator.rejoin()
+
+    def members(self) -> list[MemberState]:
+        """The other members of the swarm, with when each was last heard of."""
+        return self._on_swarm().members.others()
+
+    async def participate(
+        self, chunk_id: ChunkId, progress: Progress | None = None, *, again: bool = False
+    ) -> str:
+        """Replicate `chunk_id` here: fetch it with its history from a holder, under
+        its write lock, and receive every later commit. Returns the chunk's table.
+
+        With `again`, a chunk held already is fetched anew (to catch up)."""
+        return await self._on_swarm().replicator.participate(chunk_id, progress, again=again)
+
+    async def leave_chunk(self, chunk_id: ChunkId, *, force: bool = False) -> None:
+        """Stop replicating `chunk_id` (the last holder needs `force`)."""
+        if self.swarm is None:
+            if not force:
+                raise UsageError(f"this peer is the only holder of {chunk_id.short}; pass force")
+            self.store.drop_chunk(chunk_id)
+            return
+        await self.swarm.replicator.leave(chunk_id, force)
+
+    def holders(self, chunk_id: ChunkId) -> list[PeerId]:
+        """The peers that hold a chunk held here."""
+        self.store.chunk_table(chunk_id)
+        return self.store.holders(chunk_id) or [self.id]
+
+    async def peer_chunks(self, address: str, table: str | None = None) -> list[ChunkSummary]:
+        """The chunks the peer at `address` holds (lookup by peer, DESIGN §7).
+
+        Raises:
+            NetworkError: it did not answer in time.
+        """
+        from mapapi.service.control import ask_chunk_list
+
+        rpc = self.swarm.rpc if self.swarm is not None else None
+        return await ask_chunk_list(address, table, rpc=rpc, security=self.security)
+
+    async def query_bbox(
+        self, box: BBox, table: str | None = None, stats: QueryStats | None = None
+    ) -> list[PlacedChunk]:
+        """The chunks whose box overlaps `box` (of `table`, if given), with their
+        holders, sorted by chunk id (DESIGN §7). On the network the spatial index
+        is asked (chunks held here are added even before their announcement
+        lands); alone, only the chunks held here are searched. A box partly
+        outside the index's bounds is clamped; one fully outside matches nothing.
+
+        Raises:
+            QueryError: no owner of the box's cells answered.
+        """
+        if self.grid.clamp(box) is None:
+            return []
+        found: dict[ChunkId, SpatialRef] = {}
+        if self.swarm is not None and self.swarm.index is not None:
+            for ref in await self.swarm.index.query(box, table, stats=stats):
+                found[ref.chunk] = ref
+        for ref in self.places.placed():  # what is held here is current
+            inside = self.grid.clamp(ref.bbox) is not None  # as the index would have it
+            if inside and ref.bbox.overlaps(box) and table in (None, ref.table):
+                found[ref.chunk] = ref
+        held = {c.id for c in self.store.chunks()}
+        return [self._holders_of(found[c], c in held) for c in sorted(found)]
+
+    def _holders_of(self, ref: SpatialRef, held: bool) -> PlacedChunk:
+        if held:
+            ids = self.store.holders(ref.chunk) or [self.id]
+            return PlacedChunk(ref, tuple(self._member(p) for p in ids), held=True)
+        return PlacedChunk(ref, tuple(self._member(p, a) for p, a in ref.holders), held=False)
+
+    def _member(self, peer: PeerId, address: str | None = None) -> Member:
+        """`peer` with its name when this peer knows it; `address` (where the
+        spatial index says it serves the chunk) replaces the member list's."""
+        from mapapi.net.messages import Member
+
+        if peer == self.id:
+            here = self.swarm.address if self.swarm is not None else ""
+            return Member(self.id, here if address is None else address, self.name)
+        known = self.swarm.members.get(peer) if self.swarm is not None else None
+        if known is None:
+            return Member(peer, address or "")
+        return known if address is None else Member(peer, address, known.name)
+
+    async def __aenter__(self) -> Peer:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- tables and chunks --------------------------------------------------
+    async def create_table(self, name: str, message_type: str | type[Message]) -> TableDescriptor:
+        """Create a table of `message_type` (a class or a full protobuf name)."""
+        if not name or not name.replace("_", "").replace("-", "").replace(".", "").isalnum():
+            raise UsageError(f"bad table name {name!r}: use letters, digits, '_', '-', '.'")
+        if isinstance(message_type, str):
+            descriptor = TableDescriptor.named(name, message_type)
+        else:
+            descriptor = TableDescriptor(name, message_type)
+        self.store.add_table(name, descriptor.type_name)
+        self._descriptors[name] = descriptor
+        return descriptor
+
+    def tables(self) -> dict[str, TableDescriptor]:
+        """Every table of the repository."""
+        return {name: self.table(name) for name in self.store.tables()}
+
+    def table(self, name: str) -> TableDescriptor:
+        """One table's descriptor."""
+        descriptor = self._descriptors.get(name)
+        if descriptor is None:
+            type_name = self.store.tables().get(name)
+            if type_name is None:
+                raise UsageError(f"no table {name!r}; create it with `mapctl table create`")
+            descriptor = self._descriptors[name] = TableDescriptor.named(name, type_name)
+        return descriptor
+
+    async def create_chunk(self, table: str) -> ChunkId:
+        """A new, empty chunk of `table`, held by this peer (and, on the network,
+        announced in the lookup index)."""
+        self.table(table)
+        chunk_id = ChunkId.new()
+        self.store.add_chunk(chunk_id, table)
+        self.store.set_holders(chunk_id, [self.id])
+        if self.swarm is not None:
+            await self.swarm.replicator.register(chunk_id)
+        return chunk_id
+
+    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
+        """The chunks this peer holds."""
+        if table is not None:
+            self.table(table)
+        return self.store.chunks(table)
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        """The table of a chunk held here.
+
+        Raises:
+            NotParticipatingError: this peer does not hold the chunk.
+        """
+        try:
+            return self.store.chunk_table(chunk_id)
+        except ChunkNotFound:
+            raise NotParticipatingError(
+                f"this peer does not hold chunk {chunk_id}; `mapctl chunk participate` first"
+            ) from None
+
+    def set_merge_policy(self, table: str, policy: MergePolicy | None) -> None:
+        """Install (or with None, remove) the auto-merge policy of a table."""
+        self.table(table)
+        if policy is None:
+            self._policies.pop(table, None)
+        else:
+            self._policies[table] = policy
+
+    # -- transactions ---------------------------------------------------------
+    def now(self) -> int:
+        """The time a transaction begun now reads at.
+
+        Alone, the newest commit time applied to the store (other processes may
+        commit to it too). In a swarm, the Lamport clock, which every message
+        advances: a view then includes every commit this peer has heard of, and
+        reads of a chunk wait while a writer holds it, so no commit at or
+        before that time can still arrive (DESIGN §5).
+        """
+        self.clock.advance_to(self.store.clock())
+        return self.clock.now() if self.swarm is not None else self.store.clock()
+
+    def begin(self, at: int | None = None, *, isolation: Isolation = "snapshot") -> Transaction:
+        """A transaction reading the map as of now (or of logical time `at`)."""
+        now = self.now()
+        if at is not None and not 0 <= at <= now:
+            raise UsageError(f"time {at} is outside 0..{now} (the newest commit time)")
+        return Transaction(self, now if at is None else at, self.id, isolation=isolation)
+
+    def read_local(self, item_id: ItemId, time: int) -> Revision | None:
+        """The newest local revision of an item at or before `time`."""
+        return self.store.read(item_id, time)
+
+    async def read(self, item_id: ItemId, time: int) -> Revision | None:
+        """The item at `time`; in a swarm, an item of a chunk not held here is
+        fetched first (its chunk is found by asking the members)."""
+        revision = self.store.read(item_id, time)
+        if self.swarm is None:
+            return revision
+        if revision is None and self.store.item_chunk(item_id) is None:
+            try:
+                found = await self.swarm.replicator.find_holders(item=item_id)
+            except ChunkNotFound:
+                return None
+            if found.chunk is not None:
+                await self.swarm.replicator.participate(found.chunk)
+        chunk = self.store.item_chunk(item_id)
+        if chunk is not None:
+            await self.swarm.locks.wait_readable(chunk)
+        return self.store.read(item_id, time)
+
+    async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
+        """Items visible at `time` in a table or chunk; a chunk not held here is
+        fetched first."""
+        if self.swarm is not None:
+            if chunk is not None and chunk not in {c.id for c in self.store.chunks()}:
+                await self.swarm.replicator.participate(chunk)
+            chunks = [chunk] if chunk is not None else [c.id for c in self.store.chunks(table)]
+            for each in chunks:
+                await self.swarm.locks.wait_readable(each)
+        return self.store.scan(time, table=table, chunk=chunk)
+
+    async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
+        """Validate and apply a transaction (see `mapapi.swarm.commit`)."""
+        if self.swarm is not None:
+            return await commit_distributed(
+                self.store,
+                self.swarm.locks,
+                self.swarm.replicator,
+                tx,
+                message,
+                self.clock,
+                self._try_merge,
+                after=self._committed,
+                rules=self.rules,
+            )
+        self._refuse_shared(tx)
+        done = commit_locally(self.store, tx, message, self.clock, self._try_merge, self.rules)
+        if done.record is not None:
+            await self._committed(done.record, done.revisions)
+        return done.record
+
+    async def _committed(self, record: CommitRecord, revisions: list[Revision]) -> None:
+        """What follows a commit of this peer, applied everywhere and (in a swarm)
+        still under its locks: the chunks' boxes are announced (DESIGN §7: a
+        query right after finds them), local triggers queued and remote
+        subscribers told (DESIGN §8)."""
+        if self.places.caches(record.chunks):
+            self.places.applied(revisions)
+        await self.places.update(record.chunks)
+        self.triggers.applied(record, revisions)
+        if self.swarm is not None:
+            await self.swarm.subscriptions.notify(record, revisions)
+
+    def _refuse_shared(self, tx: Transaction) -> None:
+        """Alone, a commit may not touch a chunk other peers hold: they would never
+        see it (DESIGN §5: every commit reaches every holder)."""
+        for chunk in sorted({c.chunk_id for c in tx.changes}):
+            if any(p != self.id for p in self.store.holders(chunk)):
+                raise PeerNotRunning(
+                    f"chunk {chunk.short} is shared with other peers; commit through the "
+                    "running peer (`mapctl peer start --join ADDR`)"
+                )
+
+    def _try_merge(self, ours: Change, theirs: Revision, base: Revision | None) -> bytes | None:
+        policy = self._policies.get(ours.table)
+        if policy is None:
+            return None
+        descriptor = self.table(ours.table)
+        merged = policy(
+            None if base is None or base.removed else descriptor.decode(base.data),
+            descriptor.decode(ours.data),
+            descriptor.decode(theirs.data),
+        )
+        return None if merged is None else descriptor.encode(merged)
+
+    # -- triggers (DESIGN §8) ------------------------------------------------------
+    def on_commit(
+        self, callback: Callback, *, chunk: ChunkId | None = None, table: str | None = None
+    ) -> int:
+        """Call `callback(event)` once for every commit applied here from now on
+        (this peer's and others') that touches `chunk`, or `table`, or anything;
+        in commit order, off the receive loop (see `mapapi.swarm.triggers`). Returns
+        the trigger's id for `remove_trigger`."""
+        if table is not None:
+            self.table(table)
+        if chunk is not None:
+            self.chunk_table(chunk)
+        return self.triggers.add(callback, chunk=chunk, table=table)
+
+    def remove_trigger(self, trigger_id: int) -> bool:
+        """Stop a trigger; returns whether it existed."""
+        return self.triggers.remove(trigger_id)
+
+    async def subscribe(self, spec: SubscriptionSpec) -> Subscription:
+        """Hear about every commit, by any peer, that changes an item inside
+        `spec`'s region (of its table, matching its filters): the matching
+        revisions arrive in the subscription's `events` (DESIGN §8).
+
+        Raises:
+            UsageError: not on the network, or a region outside the index.
+        """
+        return await self._on_swarm().subscriptions.subscribe(spec)
+
+    async def unsubscribe(self, subscription: Subscription) -> bool:
+        """Cancel a subscription; returns whether it was active."""
+        return await self._on_swarm().subscriptions.cancel(subscription.id)
+
+    # -- history -------------------------------------------------------------
+    def log(self, limit: int | None = None) -> list[CommitRecord]:
+        """Commit records, newest first."""
+        return self.store.commits(limit)
+
+    def history(self, item_id: ItemId) -> list[Revision]:
+        """Every revision of an item, oldest first."""
+        return self.store.history(item_id)
+
+    def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
+        """One commit record."""
+        return self.store.commit_record(commit_id)
+
+    def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
+        """The revisions one commit wrote."""
+        return self.store.commit_revisions(commit_id)

@@ -1,0 +1,381 @@
+"""The repository on disk: `<repo>/.mapapi/` with config, identity and store (DESIGN §9)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+import tomllib
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mapapi.core.errors import (
+    AlreadyInitialisedError,
+    CorruptRepoError,
+    MapError,
+    NotARepoError,
+    RepoError,
+    UsageError,
+)
+from mapapi.core.ids import PeerId
+from mapapi.lookup.spatial import SpatialGrid
+from mapapi.store.sqlite import SqliteStore
+
+if TYPE_CHECKING:
+    from mapapi.net.security import Security
+
+REPO_DIR = ".mapapi"
+CONFIG = "config.toml"
+STORE = "store.sqlite"
+PID_FILE = "peer.pid"  # the running peer daemon: pid, id, addresses (mapapi.service.daemon)
+PEER_LOCK = "peer.lock"  # held (flock) by the daemon for as long as it runs
+PEER_LOG = "peer.log"  # a detached daemon's stdout and stderr
+CONTROL_SOCKET = "control.sock"  # the daemon's local control endpoint (ipc)
+
+log = logging.getLogger(__name__)
+
+_SECURE_TOML = (
+    "\n# A secure peer (CurveZMQ): its keypair and trust list are in .mapapi/curve/.\n"
+    "[security]\nsecure = true\n"
+)
+_FIX_CONFIG = (
+    "fix it in an editor (`mapctl init` in an empty folder writes a valid one to compare) "
+    "or restore it from a backup"
+)
+
+
+def _toml_str(text: str) -> str:
+    """`text` as a TOML basic string: JSON quoting without the surrogate-pair
+    escapes TOML refuses (non-ASCII stays UTF-8), and DEL escaped (JSON leaves it raw)."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+@dataclass(frozen=True)
+class RepoConfig:
+    """What `config.toml` holds: the peer's name and id, the geometry of the
+    spatial index (which every peer of a swarm must share, DESIGN §7), and
+    whether the peer is secure (DESIGN §10; its keys are in `.mapapi/curve/`)."""
+
+    name: str
+    peer_id: PeerId
+    spatial: SpatialGrid = field(default_factory=SpatialGrid)
+    secure: bool = False
+
+    def to_toml(self) -> str:
+        """The config as TOML text (strings quoted as JSON, valid TOML; floats
+        written with repr, which round-trips exactly)."""
+        grid = self.spatial.to_config()
+        bounds = ", ".join(repr(float(v)) for v in grid["bounds"])
+        cells = ", ".join(str(int(n)) for n in grid["cells"])
+        return (
+            f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n\n"
+            f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
+            f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
+            f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
+        ) + (_SECURE_TOML if self.secure else "")
+
+    @classmethod
+    def from_toml(cls, text: str, source: Path) -> RepoConfig:
+        """Parse config text; raises CorruptRepoError naming `source` (a config
+        without a ``[spatial]`` table gets the default index geometry)."""
+        try:
+            data: dict[str, Any] = tomllib.loads(text)
+            spatial = data.get("spatial", {})
+            security = data.get("security", {})
+            if not isinstance(spatial, dict) or not isinstance(security, dict):
+                raise ValueError("[spatial] and [security] must be tables")
+            secure = security.get("secure", False)
+            if not isinstance(secure, bool):
+                raise ValueError("[security] secure must be true or false")
+            return cls(
+                name=str(data["name"]),
+                peer_id=PeerId(data["peer_id"]),
+                spatial=SpatialGrid.from_config(spatial),
+                secure=secure,
+            )
+        except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
+            raise CorruptRepoError(f"{source} is damaged: {exc}; {_FIX_CONFIG}") from exc
+
+
+@dataclass(frozen=True)
+class PeerRecord:
+    """What `.mapapi/service/peer.pid` says about the running peer daemon (`mapapi.service.daemon`).
+
+    Attributes:
+        pid: the daemon's process id.
+        id: its peer id.
+        name: its peer name.
+        address: where the swarm reaches it.
+        join: the exact string another peer passes to `--join` (its address).
+        control: its local control endpoint (`mapapi.service.control`).
+        started: when it started serving (Unix time).
+    """
+
+    pid: int
+    id: str
+    name: str
+    address: str
+    join: str
+    control: str
+    started: float
+
+    def to_json(self) -> str:
+        """The record as one JSON document."""
+        return json.dumps(asdict(self))
+
+
+class Repository:
+    """A map repository folder.
+
+    The peer daemon of a repository holds an exclusive `flock` on
+    `.mapapi/service/peer.lock` while it runs. That lock, not the pid, tells a live
+    daemon from a stale pid file: the kernel drops it when the process ends,
+    however it ends (SIGKILL, a crash), and a recycled pid cannot fake it.
+    """
+
+    def __init__(self, root: Path, config: RepoConfig) -> None:
+        self.root = root
+        self.config = config
+
+    @property
+    def meta_dir(self) -> Path:
+        """The `.mapapi` folder."""
+        return self.root / REPO_DIR
+
+    @property
+    def store_path(self) -> Path:
+        """The SQLite store file."""
+        return self.meta_dir / STORE
+
+    @property
+    def pid_path(self) -> Path:
+        """Where the running peer daemon describes itself."""
+        return self.meta_dir / PID_FILE
+
+    @property
+    def lock_path(self) -> Path:
+        """The file the running peer daemon keeps locked."""
+        return self.meta_dir / PEER_LOCK
+
+    @property
+    def log_path(self) -> Path:
+        """A detached peer daemon's log."""
+        return self.meta_dir / PEER_LOG
+
+    @property
+    def control_path(self) -> Path:
+        """The daemon's control socket (when the path fits an ipc endpoint)."""
+        return self.meta_dir / CONTROL_SOCKET
+
+    @classmethod
+    def init(
+        cls,
+        path: str | Path,
+        name: str | None = None,
+        spatial: SpatialGrid | None = None,
+        *,
+        secure: bool = False,
+    ) -> Repository:
+        """Create a repository in `path` (created if missing), with the spatial
+        index geometry `spatial` (default: `mapapi.lookup.spatial.DEFAULT_BOUNDS` and
+        `DEFAULT_CELLS`); `secure` also makes its keypair and empty trust list.
+
+        Raises:
+            AlreadyInitialisedError: `path` already holds one.
+        """
+        root = Path(path).resolve()
+        meta = root / REPO_DIR
+        if (meta / CONFIG).exists():
+            raise AlreadyInitialisedError(
+                f"{root} is already a map repository; use it as is, or init another folder"
+            )
+        meta.mkdir(parents=True, exist_ok=True)
+        config = RepoConfig(
+            name=name or root.name,
+            peer_id=PeerId.new(),
+            spatial=spatial or SpatialGrid(),
+            secure=secure,
+        )
+        if secure:
+            _make_keys(meta)
+        SqliteStore(meta / STORE, create=True).close()
+        tmp = meta / (CONFIG + ".tmp")
+        tmp.write_text(config.to_toml(), encoding="utf-8")
+        tmp.replace(meta / CONFIG)  # the config appears last: its presence means "initialised"
+        return cls(root, config)
+
+    @classmethod
+    def find(cls, start: str | Path = ".") -> Repository:
+        """The repository containing `start` (walking up like git).
+
+        Raises:
+            NotARepoError: none found.
+        """
+        here = Path(start).resolve()
+        for folder in (here, *here.parents):
+            config = folder / REPO_DIR / CONFIG
+            if config.is_file():
+                try:
+                    text = config.read_text(encoding="utf-8")
+                except UnicodeDecodeError as exc:
+                    raise CorruptRepoError(f"{config} is damaged: {exc}; {_FIX_CONFIG}") from exc
+                except OSError as exc:
+                    raise RepoError(
+                        f"cannot read {config}: {exc.strerror or exc}; check its owner and "
+                        "permissions (`ls -l`), or run mapctl as the user that owns the repository"
+                    ) from exc
+                return cls(folder, RepoConfig.from_toml(text, config))
+        raise NotARepoError(
+            f"not a map repository (or any parent): {here}; run `mapctl init` first"
+        )
+
+    def make_secure(self) -> None:
+        """Make this open repository secure: a keypair and an empty trust list.
+        Its data is kept; its peer must be restarted to use them.
+
+        Raises:
+            UsageError: it is secure already, or its peer runs.
+        """
+        if self.config.secure:
+            raise UsageError(f"{self.root} is a secure repository already")
+        record = self.running_peer()
+        if record is not None:
+            raise UsageError(
+                f"a peer runs on {self.root} (pid {record.pid}); stop it with "
+                "`mapctl peer stop` before making the repository secure"
+            )
+        _make_keys(self.meta_dir)
+        config = replace(self.config, secure=True)
+        tmp = self.meta_dir / (CONFIG + ".tmp")
+        tmp.write_text(config.to_toml(), encoding="utf-8")
+        tmp.replace(self.meta_dir / CONFIG)
+        self.config = config
+
+    def security(self) -> Security | None:
+        """The keypair and trust list of a secure repository; None for an open one.
+
+        Raises:
+            CorruptRepoError: the repository is secure but its secret key is
+                missing or readable by other users.
+        """
+        if not self.config.secure:
+            return None
+        from mapapi.net.security import Security
+
+        return Security.load(self.meta_dir)
+
+    def open_store(self) -> SqliteStore:
+        """Open the repository's store."""
+        return SqliteStore(self.store_path)
+
+    def is_empty(self) -> bool:
+        """True while the repository holds no table, chunk or commit (as `init` left it)."""
+        store = self.open_store()
+        try:
+            return not (store.tables() or store.chunks() or store.commits(limit=1))
+        finally:
+            store.close()
+
+    # -- the peer daemon's pid file and lock -------------------------------------------
+    def read_peer_record(self) -> PeerRecord | None:
+        """The pid file's record, or None if there is none (or it is unreadable)."""
+        try:
+            return PeerRecord(**json.loads(self.pid_path.read_text(encoding="utf-8")))
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, TypeError) as exc:
+            log.warning("ignoring the unreadable pid file %s: %s", self.pid_path, exc)
+            return None
+
+    def write_peer_record(self, record: PeerRecord) -> None:
+        """Write the pid file atomically (readers see the old file or the new one)."""
+        tmp = self.pid_path.with_name(f"{self.pid_path.name}.{os.getpid()}.tmp")
+        tmp.write_text(record.to_json() + "\n", encoding="utf-8")
+        tmp.replace(self.pid_path)
+
+    def remove_peer_record(self, pid: int | None = None) -> None:
+        """Remove the pid file (only if it is still the one of process `pid`, if given)."""
+        record = self.read_peer_record()
+        if record is not None and pid in (None, record.pid):
+            self.pid_path.unlink(missing_ok=True)
+
+    def peer_locked(self) -> bool:
+        """True while a peer daemon process runs here (it holds `peer.lock`)."""
+        import fcntl
+
+        try:
+            fd = os.open(self.lock_path, os.O_RDONLY)
+        except FileNotFoundError:
+            return False
+        try:
+            # A shared lock is granted unless a daemon holds its exclusive one; this
+            # probe holds it for microseconds (PeerLock.acquire retries meanwhile).
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        finally:
+            os.close(fd)  # also drops the probe's shared lock
+        return False
+
+    def running_peer(self) -> PeerRecord | None:
+        """The record of the peer daemon running here; None when none runs (a stale
+        pid file, left by a process that is gone, counts as none)."""
+        record = self.read_peer_record()
+        return record if record is not None and self.peer_locked() else None
+
+    def stale_peer_record(self) -> PeerRecord | None:
+        """The pid file's record if its daemon is gone, else None."""
+        record = self.read_peer_record()
+        return record if record is not None and not self.peer_locked() else None
+
+
+def _make_keys(meta: Path) -> None:
+    """The keypair and empty trust list of a new secure repository; `.mapapi/` is
+    made private (0700): it holds the secret key, the store and the control socket."""
+    from mapapi.net.security import Security
+
+    meta.chmod(0o700)
+    Security.create(meta)
+
+
+class PeerLock:
+    """The exclusive lock a peer daemon holds on its repository for its lifetime."""
+
+    def __init__(self, fd: int) -> None:
+        self._fd: int | None = fd
+
+    @classmethod
+    def acquire(cls, repo: Repository, timeout: float = 2.0) -> PeerLock:
+        """Lock `repo` for this process.
+
+        Raises:
+            UsageError: another daemon runs on the repository.
+        """
+        import fcntl
+
+        fd = os.open(repo.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return cls(fd)
+            except BlockingIOError:
+                # A `peer_locked()` probe holds a shared lock for microseconds; a
+                # daemon holds it for good.
+                if time.monotonic() > deadline:
+                    os.close(fd)
+                    record = repo.read_peer_record()
+                    who = f" (pid {record.pid}, {record.address})" if record else ""
+                    raise UsageError(
+                        f"a peer already runs on {repo.root}{who}; "
+                        "stop it with `mapctl peer stop` first"
+                    ) from None
+                time.sleep(0.01)  # sync-ok: waiting out another process's probe
+
+    def release(self) -> None:
+        """Unlock (idempotent)."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None

@@ -1,0 +1,293 @@
+"""`Swarm`: the networked side of a peer: transport, membership, locks, replication
+and its node on the Chord ring (the lookup index).
+
+It owns the RPC endpoint and every task behind it; `Peer.start()` creates it
+and `Peer.close()` closes it. Membership is simple: a joiner says Hello to any
+member, learns every member from the Welcome, and says Hello to each of them;
+a graceful leave says Bye to all (DESIGN §6). Every peer is also a node of
+the Chord ring over the same endpoint (DESIGN §7): it joins the ring with the
+swarm and hands its keys over when it leaves.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import random
+from dataclasses import dataclass
+
+from mapapi.core import limits
+from mapapi.core.clock import LamportClock
+from mapapi.core.errors import JoinRefused, MapError, UsageError
+from mapapi.core.ids import PeerId
+from mapapi.lookup.chunk_places import ChunkPlaces
+from mapapi.lookup.dht.chord import ChordNode
+from mapapi.lookup.spatial import SpatialGrid
+from mapapi.lookup.spatial_index import SpatialIndex
+from mapapi.net.codec import Ping, Pong
+from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
+from mapapi.net.rpc import Request, Rpc
+from mapapi.net.security import Security, own_address
+from mapapi.net.shaping import Shaper
+from mapapi.net.transport import ZmqTransport
+from mapapi.store.base import ReplicaStore
+from mapapi.swarm.liveness import Liveness, LivenessOptions
+from mapapi.swarm.lock_client import LockService
+from mapapi.swarm.membership import Members
+from mapapi.swarm.recovery import Recovery
+from mapapi.swarm.replication import HOLDER_TTL, Replicator
+from mapapi.swarm.subscriptions import Subscriptions
+
+log = logging.getLogger(__name__)
+
+MERGE_ROUNDS = 5
+"""Stabilize periods between two ring-merge steps through a random member."""
+
+
+@dataclass(frozen=True, slots=True)
+class ChordOptions:
+    """Timing of the peer's Chord node and of its holder registrations (seconds).
+
+    Attributes:
+        stabilize, fix_fingers, check_predecessor: periods of the ring's repair tasks.
+        timeout: deadline of each request to another node.
+        holder_ttl: lifetime of a holder registration and of a chunk's box in the
+            spatial index; each is refreshed every third of it.
+        successors: successor list length (also the number of copies of a key).
+    """
+
+    stabilize: float = 1.0
+    fix_fingers: float = 5.0
+    check_predecessor: float = 2.0
+    timeout: float = 2.0
+    holder_ttl: float = HOLDER_TTL
+    successors: int = 4
+
+
+class Swarm:
+    """Networking for one peer (see the module docstring)."""
+
+    def __init__(
+        self,
+        peer_id: PeerId,
+        name: str,
+        store: ReplicaStore,
+        clock: LamportClock,
+        *,
+        lease: float = 5.0,
+        shaper: Shaper | None = None,
+        chord: ChordOptions | None = None,
+        places: ChunkPlaces | None = None,
+        grid: SpatialGrid | None = None,
+        liveness: LivenessOptions | None = None,
+        security: Security | None = None,
+    ) -> None:
+        self.security = security
+        self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper, security=security))
+        self.grid = grid or SpatialGrid()
+        self.places = places or ChunkPlaces(store)
+        self.index: SpatialIndex | None = None  # made by `start()`, over the ring
+        self._name = name
+        self._peer_id = peer_id
+        self.members = Members(Member(peer_id, "", name))
+        self.locks = LockService(self.rpc, self.members, lease=lease)
+        self.chord_options = chord or ChordOptions()
+        self.replicator = Replicator(
+            self.rpc,
+            self.members,
+            self.locks,
+            store,
+            holder_ttl=self.chord_options.holder_ttl,
+        )
+        self._chord: ChordNode | None = None  # made by `start()`: it needs the address
+        self.subscriptions = Subscriptions(
+            self.rpc, lambda: self.members.me, store, self.chord_options.holder_ttl
+        )
+        self.locks.admit = self.replicator.admit
+        self.liveness = Liveness(self.rpc, self.members, store, liveness)
+        self.locks.is_down = self.liveness.is_dead
+        self.liveness.on_down = self.locks.writer_down
+        self.recovery = Recovery(
+            self.rpc, self.members, self.locks, store, self.replicator, self.liveness
+        )
+        self.rpc.register(Hello, self.rpc_hello)
+        self.rpc.register(Bye, self.rpc_bye)
+        self.rpc.register(Ping, lambda req: Pong(req.body.payload))
+        self.rpc.on_seen = self._seen
+        self._merging: asyncio.Task[None] | None = None
+
+    def _seen(self, peer: PeerId) -> None:
+        """A message from `peer` arrived: it is alive, and a member is seen now."""
+        self.members.touch(peer)
+        self.liveness.heard(peer)
+
+    @property
+    def address(self) -> str:
+        """The endpoint other peers reach this one at."""
+        return self.members.me.address or self.rpc.address
+
+    async def start(self, listen: str) -> str:
+        """Listen on `listen` (port 0 picks a free port); returns the real address."""
+        address = await self.rpc.start(listen)
+        options = self.chord_options
+        self._chord = ChordNode(
+            self.rpc,
+            self._peer_id,
+            successors=options.successors,
+            stabilize_period=options.stabilize,
+            fix_fingers_period=options.fix_fingers,
+            check_predecessor_period=options.check_predecessor,
+            timeout=options.timeout,
+        )
+        self.advertise(address)
+        self._chord.start()
+        self.replicator.index_on(self._chord)
+        self.index = SpatialIndex(self._chord, self.grid)
+        self.replicator.places = self.places
+        self.places.start(
+            self._chord, self.index, options.holder_ttl, lambda: (self._peer_id, self.address)
+        )
+        self.subscriptions.start(self._chord, self.grid)
+        self.liveness.start()
+        self._merging = asyncio.get_running_loop().create_task(self._merge_rings(), name="merge")
+        return address
+
+    async def _merge_rings(self) -> None:
+        """Now and then, merge this node's ring with a random member's: after a
+        partition heals, each half has repaired into a ring of its own
+        (`ChordNode.merge_through`)."""
+        rng = random.Random()
+        while True:
+            await asyncio.sleep(MERGE_ROUNDS * self.chord_options.stabilize)
+            others = [s.member.address for s in self.members.others() if s.member.address]
+            if others:
+                try:
+                    if await self.chord.merge_through(rng.choice(others)):
+                        log.info("the lookup ring met another one; merging them")
+                except MapError as exc:
+                    log.debug("ring merge step failed: %s", exc)
+
+    @property
+    def chord(self) -> ChordNode:
+        """This peer's node on the Chord ring (after `start()`)."""
+        if self._chord is None:
+            raise UsageError("the swarm is not started")
+        return self._chord
+
+    def advertise(self, address: str) -> None:
+        """Tell other peers `address` instead of the bound one (before joining):
+        a wildcard host such as tcp://0.0.0.0:7000 is no address they can reach.
+        A secure peer's address gets its public key (DESIGN §10)."""
+        address = own_address(address, self.security)
+        self.members.me = Member(self._peer_id, address, self._name)
+        self.members.add(self.members.me)
+        if self._chord is not None:
+            self._chord.readdress(address)
+
+    # -- membership ------------------------------------------------------------------
+    def rpc_hello(self, req: Request) -> Welcome:
+        """A peer introduces itself: remember it and tell it every member."""
+        member: Member = req.body.member
+        if member.id != req.sender or not member.address:
+            raise JoinRefused("Hello must carry the sender's own id and address")
+        if req.body.index != self.grid.config_fingerprint():
+            raise JoinRefused(
+                f"the spatial index differs: this swarm uses {self.grid.describe()}; "
+                "every peer needs the same [spatial] bounds and cells in .mapapi/config.toml "
+                "(set with `mapctl init --bounds ... --cells ...`)"
+            )
+        if self.members.get(member.id) is None:
+            limits.count("members", len(self.members.all()) + 1)  # strangers with new ids
+        self.members.add(member)
+        self.members.touch(member.id)
+        return Welcome(tuple(self.members.all()))
+
+    def rpc_bye(self, req: Request) -> Ack:
+        """A peer leaves the swarm gracefully (and the ring: route around it)."""
+        member = self.members.get(req.sender)
+        self.members.remove(req.sender)
+        if member is not None and member.address and self._chord is not None:
+            self._chord.forget(member.address)
+        return Ack()
+
+    async def join(self, seed: str) -> list[Member]:
+        """Join the swarm through the member at `seed`; returns every member.
+
+        Raises:
+            JoinRefused: the seed refused, or answered like no mapapi peer.
+            NetworkError: the seed did not answer in time.
+        """
+        hello = Hello(self.members.me, self.grid.config_fingerprint())
+        try:
+            welcome = await self.rpc.request(seed, hello, expect=Welcome)
+        except MapError:
+            await self.rpc.forget(seed)  # no reconnecting socket left behind
+            raise
+        if not any(m.address == seed or m.id != self._peer_id for m in welcome.members):
+            raise JoinRefused(f"{seed} answered with no members")
+        fresh = [m for m in welcome.members if m.id != self._peer_id and self.members.add(m)]
+        results = await asyncio.gather(
+            *(self.rpc.request(m.address, hello, expect=Welcome) for m in fresh),
+            return_exceptions=True,
+        )
+        for member, result in zip(fresh, results, strict=True):
+            if isinstance(result, MapError):
+                log.warning("member %s at %s did not answer: %s", member.id, member.address, result)
+            elif isinstance(result, Welcome):
+                for other in result.members:
+                    if other.id != self._peer_id:
+                        self.members.add(other)
+        await self._join_ring(seed)
+        return self.members.all()
+
+    async def _join_ring(self, seed: str) -> None:
+        """Join the Chord ring through `seed` (or another member if it fails), then
+        announce this peer's chunks again: the keys may have other owners now.
+        A peer on the ring already stays where it is."""
+        chord = self.chord
+        if chord.successors == [chord.me] and chord.predecessor is None:
+            others = [s.member.address for s in self.members.others() if s.member.address != seed]
+            for address in [seed, *others]:
+                try:
+                    await chord.join(address)
+                    break
+                except MapError as exc:
+                    log.warning("could not join the lookup ring through %s: %s", address, exc)
+            else:
+                log.warning("not on the lookup ring: chunks are found by asking the members")
+        await self.replicator.refresh()
+
+    async def leave(self) -> None:
+        """Withdraw this peer's holder registrations, hand its keys of the ring
+        over to its successor, and say Bye to every other member (best effort,
+        short deadlines)."""
+        try:  # bounded: with its neighbours dead, every step would wait for a timeout
+            async with asyncio.timeout(3 * self.chord_options.timeout):
+                await self.replicator.withdraw_all()
+                await self.subscriptions.withdraw_all()
+                if self._chord is not None:
+                    await self._chord.leave()
+        except (MapError, TimeoutError) as exc:
+            log.warning("left the lookup ring uncleanly (entries expire by themselves): %r", exc)
+        await asyncio.gather(
+            *(
+                self.rpc.request(s.member.address, Bye(), timeout=1.0)
+                for s in self.members.others()
+            ),
+            return_exceptions=True,
+        )
+
+    async def close(self) -> None:
+        """Stop renewals and the ring's tasks, and close the endpoint (fails
+        pending requests)."""
+        if self._merging is not None:
+            self._merging.cancel()
+            await asyncio.gather(self._merging, return_exceptions=True)
+        await self.liveness.close()
+        await self.recovery.close()
+        await self.replicator.close()
+        await self.subscriptions.close()
+        if self._chord is not None:
+            await self._chord.close()
+        await self.locks.close()
+        await self.rpc.close()

@@ -1,0 +1,411 @@
+"""Swarm benchmarks over peer processes: `mapctl bench viewtest` and `bench commit`.
+
+Each peer is a `python -m mapbench.worker` child on loopback, driven over
+its acknowledged line protocol (see `mapbench.worker`); every reply is
+awaited under a deadline and every child is stopped (then killed) on the way
+out. Nothing here asserts a speed; the figures go to docs/benchmarks.md.
+
+- `viewtest` (paper Algorithm 1, DESIGN §12): P peers hold one counter chunk
+  and all increment the one counter N times at once, retrying on conflict;
+  afterwards every peer must read a0 + P*N and hold the same commit log.
+- `commit_latency`: one writer commits N increments, uncontended, to a chunk
+  held by K peer processes (the writer is one of them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import os
+import platform
+import queue
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import IO, Any, Literal
+
+from mapapi.core.errors import MapError
+from mapapi.net.security import key_text, split_address
+
+STARTUP_TIMEOUT = 30.0
+CALL_TIMEOUT = 60.0
+RUN_DEADLINE = 300.0
+Writer = Literal["arbiter", "other"]
+
+
+class WorkerFailed(MapError):
+    """A worker process answered with an error, died, or did not answer in time."""
+
+
+class SwarmCheckFailed(MapError):
+    """The peers disagree after a benchmark (a lost or a diverging commit)."""
+
+
+class WorkerProcess:
+    """One `mapbench.worker` child and its acknowledged line protocol.
+
+    Args:
+        folder: the child's repository folder (created if missing).
+        name: the peer's name.
+        lease: write-lock lease in seconds.
+        use_uvloop: run the child's event loop on uvloop.
+        log: where the child's stderr goes (a file; None discards it).
+        secure: a secure peer (its address carries its key; it trusts no one yet).
+    """
+
+    def __init__(
+        self,
+        folder: Path,
+        name: str,
+        *,
+        lease: float = 5.0,
+        use_uvloop: bool = False,
+        log: IO[str] | None = None,
+        secure: bool = False,
+    ) -> None:
+        self.name = name
+        command = [sys.executable, "-m", "mapbench.worker", "--repo", str(folder)]
+        command += ["--name", name, "--lease", str(lease)]
+        command += ["--uvloop"] if use_uvloop else []
+        command += ["--secure"] if secure else []
+        self.proc = subprocess.Popen(
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=log if log is not None else subprocess.DEVNULL,
+            text=True,
+            bufsize=1,
+        )
+        self._lines: queue.Queue[str | None] = queue.Queue()
+        self._reader = threading.Thread(target=self._read, name=f"{name} stdout", daemon=True)
+        self._reader.start()
+        self.id = ""
+        self.address = ""
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self._lines.put(line)
+        self._lines.put(None)  # end of output: the child exited
+
+    def wait_ready(self, timeout: float = STARTUP_TIMEOUT) -> None:
+        """Wait for the child's `ready` line; remember its id and address."""
+        ready = self.reply("ready", timeout)
+        self.id, self.address = ready["id"], ready["address"]
+
+    def send(self, *words: object) -> None:
+        """Write one command line."""
+        assert self.proc.stdin is not None
+        try:
+            self.proc.stdin.write(" ".join(str(w) for w in words) + "\n")
+            self.proc.stdin.flush()
+        except (BrokenPipeError, ValueError) as exc:
+            raise WorkerFailed(f"worker {self.name} exited (its stdin is closed)") from exc
+
+    def reply(self, word: str, timeout: float = CALL_TIMEOUT) -> dict[str, Any]:
+        """The next reply line, which must be `word {json}`.
+
+        Raises:
+            WorkerFailed: an `error` reply, another word, no reply within
+                `timeout` seconds, or the child exited.
+        """
+        try:
+            line = self._lines.get(timeout=timeout)
+        except queue.Empty:
+            raise WorkerFailed(
+                f"worker {self.name} did not answer {word!r} within {timeout:g} s"
+            ) from None
+        if line is None:
+            raise WorkerFailed(f"worker {self.name} exited (code {self.proc.poll()})")
+        got, _, body = line.partition(" ")
+        data: dict[str, Any] = json.loads(body) if body.strip() else {}
+        if got == "error":
+            raise WorkerFailed(f"worker {self.name}: {data.get('error')}: {data.get('message')}")
+        if got != word:
+            raise WorkerFailed(f"worker {self.name} answered {got!r}, expected {word!r}")
+        return data
+
+    def call(self, word: str, *command: object, timeout: float = CALL_TIMEOUT) -> dict[str, Any]:
+        """Send a command and wait for its acknowledgement `word`."""
+        self.send(*command)
+        return self.reply(word, timeout)
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Ask the child to quit; kill it if it does not exit within `timeout` s."""
+        try:
+            if self.proc.poll() is None:
+                with contextlib.suppress(WorkerFailed):
+                    self.send("quit")
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    self.proc.wait(timeout)
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait(timeout)
+            for stream in (self.proc.stdin, self.proc.stdout):
+                if stream is not None:
+                    with contextlib.suppress(OSError):
+                        stream.close()
+            self._reader.join(timeout)
+
+
+@contextlib.contextmanager
+def spawn_workers(
+    count: int,
+    folder: Path,
+    *,
+    lease: float = 5.0,
+    use_uvloop: bool = False,
+    secure: bool = False,
+) -> Iterator[list[WorkerProcess]]:
+    """`count` started workers with repositories under `folder`; all stopped on exit.
+    `secure` workers trust each other's keys (a secure swarm, DESIGN §10).
+
+    Their stderr goes to `folder/worker-I.log`.
+    """
+    started: list[WorkerProcess] = []
+    logs: list[IO[str]] = []
+    try:
+        for index in range(count):
+            log = (folder / f"worker-{index}.log").open("w")
+            logs.append(log)
+            started.append(
+                WorkerProcess(
+                    folder / f"peer{index}",
+                    f"peer{index}",
+                    lease=lease,
+                    use_uvloop=use_uvloop,
+                    log=log,
+                    secure=secure,
+                )
+            )
+        for worker in started:
+            worker.wait_ready()
+        if secure:
+            keys = {w.name: split_address(w.address)[1] for w in started}
+            for worker in started:
+                others = [key_text(k) for n, k in keys.items() if n != worker.name and k]
+                worker.call("trusted", "trust", *others)
+        yield started
+    finally:
+        for worker in started:
+            worker.close()
+        for stream in logs:
+            stream.close()
+
+
+def counter_swarm(workers: Sequence[WorkerProcess], a0: int = 0) -> tuple[str, str]:
+    """Join every worker through the first, create the counter chunk on the first
+    and make every other worker participate; returns (chunk id, item id)."""
+    first = workers[0]
+    for worker in workers[1:]:
+        worker.call("joined", "join", first.address)
+    created = first.call("created", "create", a0)
+    for worker in workers[1:]:
+        worker.call("participating", "participate", created["chunk"])
+    for worker in workers:
+        holders = worker.call("holders", "holders", created["chunk"])["holders"]
+        if len(holders) != len(workers):
+            raise SwarmCheckFailed(
+                f"{worker.name} knows {len(holders)} holders of the counter chunk, "
+                f"expected {len(workers)}"
+            )
+    return created["chunk"], created["item"]
+
+
+def run_increments(
+    workers: Sequence[WorkerProcess], n: int, item: str, deadline: float = RUN_DEADLINE
+) -> tuple[list[dict[str, Any]], float]:
+    """Start Algorithm 1 (`run`) on every worker at once; returns their reports
+    and the wall time from the first command sent to the last report read."""
+    start = time.perf_counter()
+    for worker in workers:
+        worker.send("run", n, item, deadline)
+    reports = [w.reply("ran", deadline + 10.0) for w in workers]
+    return reports, time.perf_counter() - start
+
+
+def _traffic(workers: Sequence[WorkerProcess]) -> tuple[int, dict[str, int], float]:
+    """Messages sent (in all, and by type) and CPU seconds used, summed over workers."""
+    total, cpu = 0, 0.0
+    by_type: dict[str, int] = {}
+    for worker in workers:
+        stats = worker.call("stats", "stats")
+        total += stats["sent"]
+        cpu += stats["cpu_s"]
+        for name, count in stats["sent_by_type"].items():
+            by_type[name] = by_type.get(name, 0) + count
+    return total, by_type, cpu
+
+
+def _diff(after: dict[str, int], before: dict[str, int]) -> dict[str, int]:
+    return {k: v - before.get(k, 0) for k, v in sorted(after.items()) if v - before.get(k, 0)}
+
+
+def percentile(values: Sequence[float], q: float) -> float:
+    """The `q`-quantile (0..1) of `values`, nearest rank."""
+    ordered = sorted(values)
+    if not ordered:
+        raise ValueError("no samples")
+    return ordered[min(len(ordered) - 1, int(len(ordered) * q))]
+
+
+def _environment(use_uvloop: bool, load: float, secure: bool = False) -> dict[str, Any]:
+    return {
+        "secure": secure,
+        "loop": "uvloop" if use_uvloop else "asyncio",
+        "python": platform.python_version(),
+        "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} cpu",
+        "load_1min_before": round(load, 2),
+    }
+
+
+def _scratch(directory: str | Path | None) -> tempfile.TemporaryDirectory[str]:
+    return tempfile.TemporaryDirectory(prefix="mapapi-swarm-", dir=directory)
+
+
+def viewtest(
+    peers: int,
+    n: int,
+    *,
+    a0: int = 0,
+    directory: str | Path | None = None,
+    use_uvloop: bool = False,
+    deadline: float = RUN_DEADLINE,
+    secure: bool = False,
+) -> dict[str, Any]:
+    """Paper Algorithm 1 across `peers` processes, `n` increments each (`secure`:
+    a secure swarm, CurveZMQ between the peers).
+
+    Returns:
+        JSON-ready figures: peers, n, expected (a0 + peers*n), final (the value
+        if every peer reads the same, else None), commits_per_s, aborts_per_commit,
+        p50_ms and p99_ms of one increment (first begin to successful commit,
+        retries included), then details: every peer's value and log length,
+        whether the logs are identical, messages per commit, the environment.
+        Call `check_viewtest` on it to turn a disagreement into an error.
+    """
+    if peers < 1 or n < 1:
+        raise ValueError(f"peers and n must be at least 1, got {peers} and {n}")
+    load = os.getloadavg()[0]
+    spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
+    with _scratch(directory) as tmp, spawn(peers, Path(tmp)) as ws:
+        _, item = counter_swarm(ws, a0)
+        sent0, types0, cpu0 = _traffic(ws)
+        reports, seconds = run_increments(ws, n, item, deadline)
+        sent1, types1, cpu1 = _traffic(ws)
+        values = [w.call("value", "value", item) for w in ws]
+        logs = [w.call("log", "log")["ids"] for w in ws]
+    commits = peers * n
+    increments = [x for r in reports for x in r["increment_ms"]]
+    commit_calls = [x for r in reports for x in r["commit_ms"]]
+    distinct = {v["value"] for v in values}
+    return {
+        "peers": peers,
+        "n": n,
+        "expected": a0 + commits,
+        "final": distinct.pop() if len(distinct) == 1 else None,
+        "commits_per_s": round(commits / seconds, 1),
+        "aborts_per_commit": round(sum(r["aborts"] for r in reports) / commits, 3),
+        "p50_ms": round(percentile(increments, 0.5), 3),
+        "p99_ms": round(percentile(increments, 0.99), 3),
+        "commit_p50_ms": round(percentile(commit_calls, 0.5), 3),
+        "commit_p99_ms": round(percentile(commit_calls, 0.99), 3),
+        "values": [v["value"] for v in values],
+        "log_lengths": [v["log"] for v in values],
+        "logs_identical": all(lg == logs[0] for lg in logs),
+        "conflicts": sum(r["conflicts"] for r in reports),
+        "lock_timeouts": sum(r["lock_timeouts"] for r in reports),
+        "other_retries": sum(r["other_retries"] for r in reports),
+        "messages_per_commit": round((sent1 - sent0) / commits, 2),
+        "messages_by_type": _diff(types1, types0),
+        "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / commits, 3),
+        "seconds": round(seconds, 3),
+        "a0": a0,
+        **_environment(use_uvloop, load, secure),
+    }
+
+
+def check_viewtest(result: dict[str, Any]) -> None:
+    """Raise `SwarmCheckFailed` unless every peer reads a0 + P*N and holds one log.
+
+    Raises:
+        SwarmCheckFailed: naming what differs.
+    """
+    if result["final"] is None:
+        raise SwarmCheckFailed(
+            f"the peers disagree on the counter: {result['values']} (expected "
+            f"{result['expected']} on every peer)"
+        )
+    if result["final"] != result["expected"]:
+        raise SwarmCheckFailed(
+            f"every peer reads {result['final']}, expected {result['expected']}: "
+            f"{result['expected'] - result['final']} increment(s) lost"
+        )
+    if not result["logs_identical"]:
+        raise SwarmCheckFailed(f"the peers' commit logs differ (lengths {result['log_lengths']})")
+
+
+def commit_latency(
+    holders: int,
+    n: int,
+    *,
+    writer: Writer = "other",
+    directory: str | Path | None = None,
+    use_uvloop: bool = False,
+    warmup: int = 50,
+    secure: bool = False,
+) -> dict[str, Any]:
+    """Uncontended commits by one writer to a chunk held by `holders` processes.
+
+    Args:
+        holders: peer processes holding the chunk (the writer is one of them).
+        n: timed commits (one Algorithm 1 increment each, never a conflict).
+        writer: "other" commits from a holder that is not the arbiter (the
+            lowest peer id), which costs one more round trip; "arbiter" from
+            the arbiter itself. With one holder both are the same.
+        warmup: untimed commits first (connections, caches).
+        secure: a secure swarm (CurveZMQ between the peers).
+
+    Returns:
+        JSON-ready figures: holders, n, p50_ms / p99_ms / mean_ms of `commit()`,
+        messages per commit summed over every process (requests and replies,
+        by type), and the environment.
+    """
+    if holders < 1 or n < 1:
+        raise ValueError(f"holders and n must be at least 1, got {holders} and {n}")
+    load = os.getloadavg()[0]
+    spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
+    with _scratch(directory) as tmp, spawn(holders, Path(tmp)) as ws:
+        _, item = counter_swarm(ws)
+        by_id = sorted(ws, key=lambda w: w.id)
+        chosen = by_id[0] if writer == "arbiter" else by_id[-1]
+        if warmup:
+            run_increments([chosen], warmup, item)
+        sent0, types0, cpu0 = _traffic(ws)
+        (report,), _ = run_increments([chosen], n, item)
+        sent1, types1, cpu1 = _traffic(ws)
+        values = {w.call("value", "value", item)["value"] for w in ws}
+    if values != {warmup + n}:
+        raise SwarmCheckFailed(f"holders read {sorted(values)}, expected {warmup + n}")
+    latencies = report["commit_ms"]
+    return {
+        "holders": holders,
+        "n": n,
+        "writer": "arbiter" if chosen is by_id[0] else "other",
+        "p50_ms": round(percentile(latencies, 0.5), 3),
+        "p99_ms": round(percentile(latencies, 0.99), 3),
+        "mean_ms": round(statistics.fmean(latencies), 3),
+        "commits_per_s": round(n / report["seconds"], 1),
+        "messages_per_commit": round((sent1 - sent0) / n, 2),
+        "messages_by_type": _diff(types1, types0),
+        "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / n, 3),
+        "aborts": report["aborts"],
+        **_environment(use_uvloop, load, secure),
+    }
