@@ -22,6 +22,32 @@ class ChunkInfo:
     items: int
 
 
+@dataclass(frozen=True, slots=True)
+class LogRow:
+    """One stored Raft log entry of a chunk's group (kind: the entry kind's number)."""
+
+    index: int
+    term: int
+    kind: int
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftRecord:
+    """What a chunk's Raft group persisted here: hard state, applied index, the
+    last snapshot (index, term, config, data) and the log after it."""
+
+    term: int
+    vote: int
+    commit: int
+    applied: int
+    snap_index: int
+    snap_term: int
+    snap_config: bytes
+    snap_data: bytes
+    entries: tuple[LogRow, ...]
+
+
 class Store(Protocol):
     """Tables, chunks, full item history, commit records and persisted views.
 
@@ -139,6 +165,32 @@ class ReplicaStore(Store, Protocol):
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
         """Forget a chunk's replica (commit records stay)."""
+
+    # -- the Raft group of each chunk (DESIGN §13) -------------------------------------
+    def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
+        """The persisted state of the chunk's group, or None if there is none."""
+
+    def raft_save(
+        self,
+        chunk_id: ChunkId,
+        *,
+        hard: tuple[int, int, int] | None = None,
+        entries: Sequence[LogRow] = (),
+        snapshot: tuple[int, int, bytes, bytes] | None = None,
+    ) -> None:
+        """Persist a snapshot, then entries (replacing the log from the first one's
+        index on), then the hard state (term, vote, commit), atomically."""
+
+    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
+        """Record the applied index; inside `exclusive()` with the entry's effect,
+        so both land or neither does.
+
+        Raises:
+            ValueError: the index goes backwards.
+        """
+
+    def raft_drop(self, chunk_id: ChunkId) -> None:
+        """Forget the chunk's group state."""
 
 
 def newest_first(records: Iterator[CommitRecord] | list[CommitRecord]) -> list[CommitRecord]:

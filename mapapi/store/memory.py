@@ -5,11 +5,12 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import replace
 
 from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import ChunkInfo, IdKind, newest_first
+from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, newest_first
 
 
 class MemoryStore:
@@ -24,6 +25,7 @@ class MemoryStore:
         self._commits: dict[CommitId, tuple[CommitRecord, list[Revision]]] = {}
         self._views: dict[str, bytes] = {}
         self._holders: dict[ChunkId, set[PeerId]] = {}
+        self._raft: dict[ChunkId, RaftRecord] = {}
 
     def close(self) -> None:
         """Nothing to release."""
@@ -246,3 +248,61 @@ class MemoryStore:
             # installing the chunk again would skip them as applied already
             for _, applied in self._commits.values():
                 applied[:] = [r for r in applied if r.chunk_id != chunk_id]
+
+    # -- the Raft group of each chunk ---------------------------------------------------
+    def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
+        """The kept state of the chunk's Raft group, or None."""
+        with self._lock:
+            return self._raft.get(chunk_id)
+
+    def raft_save(
+        self,
+        chunk_id: ChunkId,
+        *,
+        hard: tuple[int, int, int] | None = None,
+        entries: Sequence[LogRow] = (),
+        snapshot: tuple[int, int, bytes, bytes] | None = None,
+    ) -> None:
+        """Keep a snapshot, then entries, then the hard state (as `raft_sql.save`)."""
+        with self._lock:
+            kept = self._raft.get(chunk_id) or RaftRecord(0, 0, 0, 0, 0, 0, b"", b"", ())
+            if snapshot is not None:
+                index, term, config, data = snapshot
+                kept = replace(
+                    kept,
+                    snap_index=index,
+                    snap_term=term,
+                    snap_config=config,
+                    snap_data=data,
+                    commit=max(kept.commit, index),
+                    entries=tuple(e for e in kept.entries if e.index > index),
+                )
+            if entries:
+                first = entries[0].index
+                kept = replace(
+                    kept, entries=(*(e for e in kept.entries if e.index < first), *entries)
+                )
+            if hard is not None:
+                kept = replace(kept, term=hard[0], vote=hard[1], commit=hard[2])
+            self._raft[chunk_id] = kept
+
+    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
+        """Keep the applied index.
+
+        Raises:
+            ValueError: it goes backwards, or the chunk has no group state.
+        """
+        with self._lock:
+            kept = self._raft.get(chunk_id)
+            if kept is None:
+                raise ValueError(f"chunk {chunk_id} has no Raft state to apply to")
+            if index < kept.applied:
+                raise ValueError(
+                    f"chunk {chunk_id}: applied index {index} is behind {kept.applied}"
+                )
+            self._raft[chunk_id] = replace(kept, applied=index)
+
+    def raft_drop(self, chunk_id: ChunkId) -> None:
+        """Forget the chunk's group state."""
+        with self._lock:
+            self._raft.pop(chunk_id, None)

@@ -18,7 +18,8 @@ from pathlib import Path
 from mapapi.core.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import ChunkInfo, IdKind
+from mapapi.store import raft_sql
+from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord
 from mapapi.store.file_check import check_file, check_schema
 
 FORMAT = "mapapi-store"
@@ -124,7 +125,22 @@ class SqliteStore:
                     (FORMAT, str(SCHEMA_VERSION)),
                 )
         self._add_columns(con)
-        check_schema(con, self.path, _SCHEMA, FORMAT, SCHEMA_VERSION)
+        self._add_raft_tables(con)
+        check_schema(con, self.path, _SCHEMA + raft_sql.RAFT_SCHEMA, FORMAT, SCHEMA_VERSION)
+
+    def _add_raft_tables(self, con: sqlite3.Connection) -> None:
+        """Give a mapapi store written before Raft its group tables (no write
+        transaction when they are there: most opens are reads)."""
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if "raft_state" in tables or "meta" not in tables:
+            return
+        marker = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
+        if marker is None or marker[0] != FORMAT:
+            return  # not ours: check_schema refuses it untouched
+        with self._write(con):
+            for statement in raft_sql.RAFT_SCHEMA.split(";"):
+                if statement.strip():
+                    con.execute(statement)
 
     def _add_columns(self, con: sqlite3.Connection) -> None:
         """Bring a store written before `_ADDED_COLUMNS` up to date (idempotent).
@@ -557,6 +573,35 @@ class SqliteStore:
                 [(c, c) for c in had if c not in by_commit],
             )
             self.set_holders(chunk_id, holders)
+
+    def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
+        """The persisted state of the chunk's Raft group, or None."""
+        return raft_sql.load(self._con(), chunk_id)
+
+    def raft_save(
+        self,
+        chunk_id: ChunkId,
+        *,
+        hard: tuple[int, int, int] | None = None,
+        entries: Sequence[LogRow] = (),
+        snapshot: tuple[int, int, bytes, bytes] | None = None,
+    ) -> None:
+        """Persist one Ready's snapshot, entries and hard state in one transaction."""
+        con = self._con()
+        with self._write(con):
+            raft_sql.save(con, chunk_id, hard=hard, entries=entries, snapshot=snapshot)
+
+    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
+        """Record the applied index (joins the caller's `exclusive()` transaction)."""
+        con = self._con()
+        with self._write(con):
+            raft_sql.set_applied(con, chunk_id, index)
+
+    def raft_drop(self, chunk_id: ChunkId) -> None:
+        """Forget the chunk's group state."""
+        con = self._con()
+        with self._write(con):
+            raft_sql.drop(con, chunk_id)
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
         """Forget a chunk's replica (this peer left it); commit records stay."""

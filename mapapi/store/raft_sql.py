@@ -1,0 +1,120 @@
+"""The Raft state of each chunk's group in the SQLite store (DESIGN §13).
+
+Per chunk: the hard state (term, vote, commit index), the index applied to the
+store's revisions, the last snapshot's metadata, and the log after it. Kept in
+the same file as the revisions so that an entry's effect and the applied index
+move in one SQL transaction (`SqliteStore.exclusive`): after a crash nothing is
+applied twice and nothing applied is forgotten.
+
+Functions take a connection inside a write transaction the caller holds; they
+know rows, not Raft (node ids and entry kinds are plain integers here).
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Sequence
+
+from mapapi.store.base import LogRow, RaftRecord
+
+RAFT_SCHEMA = """
+CREATE TABLE IF NOT EXISTS raft_state (
+    chunk_id TEXT PRIMARY KEY, term INTEGER NOT NULL DEFAULT 0,
+    vote INTEGER NOT NULL DEFAULT 0, commit_index INTEGER NOT NULL DEFAULT 0,
+    applied INTEGER NOT NULL DEFAULT 0, snap_index INTEGER NOT NULL DEFAULT 0,
+    snap_term INTEGER NOT NULL DEFAULT 0, snap_config BLOB NOT NULL DEFAULT x'',
+    snap_data BLOB NOT NULL DEFAULT x'');
+CREATE TABLE IF NOT EXISTS raft_log (
+    chunk_id TEXT NOT NULL, idx INTEGER NOT NULL, term INTEGER NOT NULL,
+    kind INTEGER NOT NULL, data BLOB NOT NULL,
+    PRIMARY KEY (chunk_id, idx)) WITHOUT ROWID;
+"""
+
+
+def load(con: sqlite3.Connection, chunk: str) -> RaftRecord | None:
+    """The stored state of `chunk`'s group, or None if this peer never persisted one."""
+    row = con.execute(
+        "SELECT term, vote, commit_index, applied, snap_index, snap_term, snap_config, "
+        "snap_data FROM raft_state WHERE chunk_id = ?",
+        (chunk,),
+    ).fetchone()
+    if row is None:
+        return None
+    entries = tuple(
+        LogRow(index, term, kind, bytes(data))
+        for index, term, kind, data in con.execute(
+            "SELECT idx, term, kind, data FROM raft_log WHERE chunk_id = ? ORDER BY idx", (chunk,)
+        )
+    )
+    term, vote, commit, applied, snap_index, snap_term, snap_config, snap_data = row
+    return RaftRecord(
+        term,
+        vote,
+        commit,
+        applied,
+        snap_index,
+        snap_term,
+        bytes(snap_config),
+        bytes(snap_data),
+        entries,
+    )
+
+
+def save(
+    con: sqlite3.Connection,
+    chunk: str,
+    *,
+    hard: tuple[int, int, int] | None = None,
+    entries: Sequence[LogRow] = (),
+    snapshot: tuple[int, int, bytes, bytes] | None = None,
+) -> None:
+    """Persist one `Ready`'s worth of state, in the Ready order contract's order:
+    the snapshot (it replaces the log up to its index), then the entries (the
+    first replaces every stored entry from its index on), then the hard state.
+
+    Args:
+        hard: (term, vote, commit index).
+        snapshot: (index, term, config bytes, data bytes).
+    """
+    con.execute("INSERT OR IGNORE INTO raft_state (chunk_id) VALUES (?)", (chunk,))
+    if snapshot is not None:
+        index, term, config, data = snapshot
+        con.execute(
+            "UPDATE raft_state SET snap_index = ?, snap_term = ?, snap_config = ?, snap_data = ?, "
+            "commit_index = MAX(commit_index, ?) WHERE chunk_id = ?",
+            (index, term, config, data, index, chunk),
+        )
+        con.execute("DELETE FROM raft_log WHERE chunk_id = ? AND idx <= ?", (chunk, index))
+    if entries:
+        con.execute(
+            "DELETE FROM raft_log WHERE chunk_id = ? AND idx >= ?", (chunk, entries[0].index)
+        )
+        con.executemany(
+            "INSERT INTO raft_log (chunk_id, idx, term, kind, data) VALUES (?, ?, ?, ?, ?)",
+            [(chunk, e.index, e.term, e.kind, e.data) for e in entries],
+        )
+    if hard is not None:
+        con.execute(
+            "UPDATE raft_state SET term = ?, vote = ?, commit_index = ? WHERE chunk_id = ?",
+            (*hard, chunk),
+        )
+
+
+def set_applied(con: sqlite3.Connection, chunk: str, index: int) -> None:
+    """Record that the store's revisions reflect `chunk`'s log up to `index`.
+
+    Raises:
+        ValueError: `index` goes backwards (an entry would be applied twice).
+    """
+    row = con.execute("SELECT applied FROM raft_state WHERE chunk_id = ?", (chunk,)).fetchone()
+    if row is None:
+        raise ValueError(f"chunk {chunk} has no Raft state to apply to")
+    if index < row[0]:
+        raise ValueError(f"chunk {chunk}: applied index {index} is behind {row[0]}")
+    con.execute("UPDATE raft_state SET applied = ? WHERE chunk_id = ?", (index, chunk))
+
+
+def drop(con: sqlite3.Connection, chunk: str) -> None:
+    """Forget `chunk`'s group (this peer no longer holds the chunk)."""
+    con.execute("DELETE FROM raft_log WHERE chunk_id = ?", (chunk,))
+    con.execute("DELETE FROM raft_state WHERE chunk_id = ?", (chunk,))
