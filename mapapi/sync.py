@@ -82,7 +82,7 @@ class _BlockingConflict(ConflictError):
     """A `ConflictError` whose `merge()` returns a blocking transaction too."""
 
     def __init__(self, err: ConflictError, runner: _LoopThread) -> None:
-        super().__init__(err.conflicts, err._transaction, err.resolved_at)
+        super().__init__(err.conflicts, err._transaction, err.seen_at)
         self._runner = runner
 
     def merge(self) -> Blocking:  # type: ignore[override]

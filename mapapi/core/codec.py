@@ -1,7 +1,10 @@
-"""The only module that sees generated protobuf code (`mapapi/_pb`).
+"""The storage codec: the core's dataclasses as messages of `proto/mapapi/v1/core.proto`.
 
-It converts between the core's dataclasses and the messages of
-`proto/mapapi/v1/*.proto`, for storage (persisted views) and the wire.
+It converts revisions, commit records, changes, conflicts and persisted views,
+for storage and for the wire codec (`mapapi.net.codec`, which sees only the
+envelope of `wire.proto`). It is not the only module that sees generated
+protobuf: the spatial index stores its entries as `lookup.proto` messages
+(`mapapi.lookup.entries`) and the application layer reads `maps.proto` types.
 """
 
 from __future__ import annotations
@@ -104,17 +107,34 @@ def change_from_pb(m: core_pb2.Change) -> Change:
     )
 
 
+def conflict_to_pb(c: Conflict) -> core_pb2.Conflict:
+    """A conflict as its protobuf message (its chunk is its newest revision's)."""
+    entry = core_pb2.Conflict(table=c.table, item_id=c.item_id.to_bytes())
+    entry.theirs.CopyFrom(revision_to_pb(c.theirs))
+    if c.base is not None:
+        entry.base.CopyFrom(revision_to_pb(c.base))
+    if c.ours is not None:
+        entry.ours.CopyFrom(change_to_pb(c.ours))
+    return entry
+
+
+def conflict_from_pb(m: core_pb2.Conflict) -> Conflict:
+    """A conflict from its protobuf message (raises ValueError on bad ids)."""
+    return Conflict(
+        m.table,
+        ItemId.from_bytes(m.item_id),
+        ChunkId.from_bytes(m.theirs.chunk_id),
+        revision_from_pb(m.base) if m.HasField("base") else None,
+        change_from_pb(m.ours) if m.HasField("ours") else None,
+        revision_from_pb(m.theirs),
+    )
+
+
 def encode_view(view: View) -> bytes:
     """Serialize a CLI view (a transaction kept between commands)."""
     state = core_pb2.ViewState(name=view.name, begin_time=view.begin_time, isolation=view.isolation)
     state.changes.extend(change_to_pb(c) for c in view.changes)
-    for c in view.conflicts:
-        entry = state.conflicts.add(table=c.table, item_id=c.item_id.to_bytes())
-        entry.theirs.CopyFrom(revision_to_pb(c.theirs))
-        if c.base is not None:
-            entry.base.CopyFrom(revision_to_pb(c.base))
-        if c.ours is not None:
-            entry.ours.CopyFrom(change_to_pb(c.ours))
+    state.conflicts.extend(conflict_to_pb(c) for c in view.conflicts)
     state.read_set.extend(i.to_bytes() for i in sorted(view.read_set))
     for table, chunk in sorted(view.scopes, key=lambda s: (s[0], s[1] or "")):
         state.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
@@ -130,17 +150,7 @@ def decode_view(blob: bytes) -> View:
     state = core_pb2.ViewState()
     try:
         state.ParseFromString(blob)
-        conflicts = [
-            Conflict(
-                c.table,
-                ItemId.from_bytes(c.item_id),
-                ChunkId.from_bytes(c.theirs.chunk_id),
-                revision_from_pb(c.base) if c.HasField("base") else None,
-                change_from_pb(c.ours) if c.HasField("ours") else None,
-                revision_from_pb(c.theirs),
-            )
-            for c in state.conflicts
-        ]
+        conflicts = [conflict_from_pb(c) for c in state.conflicts]
         return View(
             state.name,
             state.begin_time,

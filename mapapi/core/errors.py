@@ -135,9 +135,14 @@ class TransactionError(MapError):
 class ConflictError(TransactionError):
     """The commit lost a race: items it changed were changed by someone else.
 
+    A ConflictError that crossed the wire (from a peer daemon to `mapctl`, or
+    from a holder to a writer) keeps its conflicts as far as the wire carries
+    them (table, item, chunk, base, ours, theirs) and `seen_at`, but not the
+    transaction: only `merge()` where that transaction lives works.
+
     Attributes:
         conflicts: one `Conflict` (base, ours, theirs) per conflicting item.
-        resolved_at: the time the conflicts were seen; `merge()` begins there.
+        seen_at: the time the conflicts were seen; `merge()` begins there.
     """
 
     retriable = True
@@ -145,12 +150,20 @@ class ConflictError(TransactionError):
     exit_code = 3
 
     def __init__(
-        self, conflicts: list[Conflict], transaction: Transaction, resolved_at: int
+        self, conflicts: list[Conflict], transaction: Transaction | None, seen_at: int
     ) -> None:
         self.conflicts = conflicts
-        self.resolved_at = resolved_at
+        self.seen_at = seen_at
         self._transaction = transaction
         super().__init__(self._hint("mapctl"))
+
+    @classmethod
+    def received(cls, message: str, conflicts: list[Conflict], seen_at: int) -> ConflictError:
+        """The error another process raised, as its reply carried it: `message`
+        whole (hint included), no transaction to merge."""
+        exc = cls(conflicts, None, seen_at)
+        exc.args = (message,)
+        return exc
 
     def _hint(self, mapctl: str) -> str:
         return (
@@ -165,7 +178,18 @@ class ConflictError(TransactionError):
 
     def merge(self) -> Transaction:
         """A new transaction, begun when the conflicts were seen, holding every
-        change of the failed one that did not conflict (git-like)."""
+        change of the failed one that did not conflict (git-like).
+
+        Raises:
+            UsageError: the error came from another process (`received`), which
+                holds the transaction: merge there, or begin anew here.
+        """
+        if self._transaction is None:
+            raise UsageError(
+                "this conflict was reported by another process; its transaction lives "
+                "there, so merge it where it was committed (or begin a new transaction "
+                "here and apply your changes again)"
+            )
         return self._transaction.merged(self)
 
 

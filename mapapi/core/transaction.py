@@ -191,8 +191,8 @@ class TransactionBackend(Protocol):
         """The peer's name (`init --name`), stamped on its commits."""
 
 
-class ViewState(Enum):
-    """Where a transaction is in its life."""
+class TxState(Enum):
+    """Where a transaction is in its life (not the protobuf `ViewState`, a persisted CLI view)."""
 
     OPEN = 1
     VALIDATING = 2
@@ -201,9 +201,9 @@ class ViewState(Enum):
 
 
 _ALLOWED = {
-    ViewState.OPEN: {ViewState.VALIDATING, ViewState.ABORTED},
-    ViewState.VALIDATING: {ViewState.OPEN, ViewState.CONFLICTED},
-    ViewState.CONFLICTED: {ViewState.ABORTED},
+    TxState.OPEN: {TxState.VALIDATING, TxState.ABORTED},
+    TxState.VALIDATING: {TxState.OPEN, TxState.CONFLICTED},
+    TxState.CONFLICTED: {TxState.ABORTED},
 }
 
 
@@ -233,23 +233,23 @@ class Transaction:
         self.author_name = backend.name
         self.view = view  # the named view this transaction stands for, if any
         self.isolation: Isolation = isolation
-        self.state = ViewState.OPEN
+        self.state = TxState.OPEN
         self._changes: dict[ItemId, Change] = {}
         self._own: dict[ItemId, Revision] = {}  # revisions of our earlier commits
         self._read_set: set[ItemId] = set()
         self._scopes: set[tuple[str, ChunkId | None]] = set()
 
     # -- state -------------------------------------------------------------
-    def _transition_to(self, target: ViewState) -> None:
+    def _transition_to(self, target: TxState) -> None:
         if target not in _ALLOWED.get(self.state, set()):
             raise ViewClosedError(
                 f"transaction cannot go {self.state.name} -> {target.name}"
-                + ("; use err.merge() for a new one" if self.state is ViewState.CONFLICTED else "")
+                + ("; use err.merge() for a new one" if self.state is TxState.CONFLICTED else "")
             )
         self.state = target
 
     def _check_open(self) -> None:
-        if self.state is not ViewState.OPEN:
+        if self.state is not TxState.OPEN:
             raise ViewClosedError(f"transaction is {self.state.name}, not OPEN")
 
     @property
@@ -436,16 +436,16 @@ class Transaction:
                 serializable isolation, the read set) since the begin time; the
                 transaction is CONFLICTED and `err.merge()` continues.
         """
-        self._transition_to(ViewState.VALIDATING)
+        self._transition_to(TxState.VALIDATING)
         try:
             record = await self._backend.commit_transaction(self, message)
         except ConflictError:
-            self.state = ViewState.CONFLICTED
+            self.state = TxState.CONFLICTED
             raise
         except BaseException:
-            self.state = ViewState.OPEN  # e.g. a lock timeout: the caller may retry
+            self.state = TxState.OPEN  # e.g. a lock timeout: the caller may retry
             raise
-        self.state = ViewState.OPEN
+        self.state = TxState.OPEN
         return record
 
     def committed(self, revisions: Iterable[Revision]) -> None:
@@ -457,18 +457,18 @@ class Transaction:
 
     def abort(self) -> None:
         """Drop the buffered changes; the transaction cannot be used again."""
-        self._transition_to(ViewState.ABORTED)
+        self._transition_to(TxState.ABORTED)
         self._changes.clear()
 
     def merged(self, error: ConflictError) -> Transaction:
         """See `ConflictError.merge`."""
         tx = Transaction(
-            self._backend, error.resolved_at, self.author, isolation=self.isolation, view=self.view
+            self._backend, error.seen_at, self.author, isolation=self.isolation, view=self.view
         )
         conflicting = {c.item_id for c in error.conflicts}
         for item_id, change in self._changes.items():
             if item_id not in conflicting:
                 tx._changes[item_id] = change
-        if self.state is ViewState.CONFLICTED:
-            self._transition_to(ViewState.ABORTED)
+        if self.state is TxState.CONFLICTED:
+            self._transition_to(TxState.ABORTED)
         return tx

@@ -1,4 +1,6 @@
-"""The wire codec: the only module that sees the envelope's generated protobuf.
+"""The wire codec: the one module that sees the envelope's generated protobuf
+(`wire_pb2`); the core's values inside it go through the storage codec
+(`mapapi.core.codec`), and the Chord index's values are opaque bytes to it.
 
 Everything above it (transport, rpc, later the lock, commit and Chord code)
 works with the frozen dataclasses defined here: `Envelope` and its bodies.
@@ -21,9 +23,11 @@ from typing import Any, Generic, TypeVar
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import wire_pb2
+from mapapi.core import codec as storage
 from mapapi.core import limits
-from mapapi.core.errors import LimitExceeded, MapError, ProtocolError
+from mapapi.core.errors import ConflictError, LimitExceeded, MapError, ProtocolError
 from mapapi.core.ids import PeerId
+from mapapi.core.transaction import Conflict
 from mapapi.net import fields, messages
 
 B = TypeVar("B")
@@ -41,10 +45,13 @@ class Kind(enum.IntEnum):
 
 @dataclass(frozen=True, slots=True)
 class ErrorReply:
-    """A failed request: the MapError code and its message (STYLE §4)."""
+    """A failed request: the MapError code and its message (STYLE §4); a
+    ConflictError's conflicts and the time they were seen travel with it."""
 
     code: int
     message: str
+    conflicts: tuple[Conflict, ...] = ()
+    seen_at: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,6 +116,29 @@ def _register_swarm_bodies() -> None:
 def _fill_error(b: ErrorReply, m: Any) -> None:
     m.code = b.code
     m.message = b.message
+    m.conflicts.extend(storage.conflict_to_pb(c) for c in b.conflicts)
+    m.seen_at = b.seen_at
+
+
+def _read_error(m: Any) -> ErrorReply:
+    limits.count("conflicts", len(m.conflicts))
+    return ErrorReply(
+        m.code,
+        m.message,
+        tuple(_read_conflict(c) for c in m.conflicts),
+        limits.lamport("conflict time", m.seen_at),
+    )
+
+
+def _read_conflict(m: Any) -> Conflict:
+    """A conflict of an ErrorReply, its fields checked against `mapapi.core.limits`."""
+    for revision in (m.base, m.theirs):
+        limits.size("table", revision.table)
+        limits.size("data", revision.data)
+        limits.lamport("revision update time", revision.update_time)
+    limits.size("table", m.table)
+    limits.size("data", m.ours.data)
+    return storage.conflict_from_pb(m)
 
 
 def _fill_payload(b: Ping | Pong, m: Any) -> None:
@@ -116,7 +146,7 @@ def _fill_payload(b: Ping | Pong, m: Any) -> None:
     m.payload = b.payload
 
 
-_register("error", ErrorReply, _fill_error, lambda m: ErrorReply(m.code, m.message))
+_register("error", ErrorReply, _fill_error, _read_error)
 _register_swarm_bodies()
 _register("ping", Ping, _fill_payload, lambda m: Ping(m.payload))
 _register("pong", Pong, _fill_payload, lambda m: Pong(m.payload))
@@ -253,7 +283,10 @@ def error_class(code: int) -> type[MapError]:
 
 
 def error_reply(exc: MapError) -> ErrorReply:
-    """The reply that carries `exc` to the requester."""
+    """The reply that carries `exc` to the requester (a ConflictError's
+    conflicts included)."""
+    if isinstance(exc, ConflictError):
+        return ErrorReply(exc.code, str(exc), tuple(exc.conflicts), exc.seen_at)
     return ErrorReply(exc.code, str(exc))
 
 
@@ -262,6 +295,8 @@ def error_from_reply(reply: ErrorReply) -> MapError:
     cls = error_class(reply.code)
     if cls is ProtocolError and reply.code != ProtocolError.code:
         return ProtocolError(f"peer replied unknown error code {reply.code}: {reply.message}")
+    if issubclass(cls, ConflictError):
+        return cls.received(reply.message, list(reply.conflicts), reply.seen_at)
     if not cls.advice:
         try:
             return cls(reply.message)

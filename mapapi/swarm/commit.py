@@ -62,7 +62,7 @@ def _decide(
     accepted, latest, conflicts = _validate(store, tx, try_merge)
     clock.advance_to(store.clock())
     if conflicts:
-        raise ConflictError(conflicts, tx, resolved_at=store.clock())
+        raise ConflictError(conflicts, tx, seen_at=store.clock())
     for rule in rules:
         rule.check(store, accepted)
     if not accepted:
@@ -84,7 +84,7 @@ def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
     """
     _, _, conflicts = _validate(store, tx, try_merge)
     if conflicts:
-        raise ConflictError(conflicts, tx, resolved_at=store.clock())
+        raise ConflictError(conflicts, tx, seen_at=store.clock())
 
 
 def _validate(

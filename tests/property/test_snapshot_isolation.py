@@ -228,7 +228,7 @@ class SnapshotMachine(RuleBasedStateMachine):
         """The refusal must name exactly the model's conflicts; maybe continue with merge()."""
         assert expected, f"commit refused but nothing changed: {err.conflicts}"
         assert {c.item_id for c in err.conflicts} == expected
-        assert err.resolved_at == self.now
+        assert err.seen_at == self.now
         for c in err.conflicts:  # base (at our begin), ours, theirs (the newest revision)
             base = None if c.base is None else Int64Value.FromString(c.base.data).value
             assert base == value_at(self.model[c.item_id], t.begin)

@@ -27,7 +27,7 @@ from mapapi.core.transaction import (
     Change,
     Op,
     Transaction,
-    ViewState,
+    TxState,
     build_revisions,
     validate,
 )
@@ -497,7 +497,7 @@ class TestConflicts:
             await tx.commit()
         err = caught.value
         assert err.retriable
-        assert tx.state is ViewState.CONFLICTED
+        assert tx.state is TxState.CONFLICTED
         (conflict,) = err.conflicts
         decode = world.peer.table(TABLE).decode
         assert (conflict.table, conflict.item_id, conflict.chunk_id) == (
@@ -576,14 +576,14 @@ class TestConflicts:
         err = caught.value
         merged = err.merge()
         assert merged is not tx
-        assert merged.state is ViewState.OPEN
-        assert merged.begin_time == err.resolved_at == world.peer.now()
+        assert merged.state is TxState.OPEN
+        assert merged.begin_time == err.seen_at == world.peer.now()
         assert [(c.op, c.item_id) for c in merged.changes] == [
             (Op.UPDATE, ids["b"]),
             (Op.REMOVE, ids["c"]),
             (Op.INSERT, d),
         ]
-        assert tx.state is ViewState.ABORTED
+        assert tx.state is TxState.ABORTED
         assert await value(merged, ids["a"]) == 7  # begun after the conflict: sees theirs
         assert await merged.commit("merged") is not None
         assert await values(world.peer.begin()) == {"a": 7, "b": 20, "d": 4}
@@ -757,7 +757,7 @@ class TestSerializable:
             world.peer.begin(isolation="chaos")  # type: ignore[arg-type]
 
 
-class TestViewState:
+class TestTxState:
     async def _conflicted(self, world: World) -> tuple[Transaction, ItemId]:
         ids = await world.seed(a=1)
         tx = world.peer.begin()
@@ -769,10 +769,10 @@ class TestViewState:
 
     async def test_open_until_conflicted(self, world: World) -> None:
         tx = world.peer.begin()
-        assert tx.state is ViewState.OPEN
+        assert tx.state is TxState.OPEN
         tx.insert(TABLE, world.counter("a", 1), world.chunk)
         await tx.commit()
-        assert tx.state is ViewState.OPEN
+        assert tx.state is TxState.OPEN
 
     async def test_conflicted_refuses_commit_and_changes(self, world: World) -> None:
         tx, item = await self._conflicted(world)
@@ -782,20 +782,20 @@ class TestViewState:
             tx.update(TABLE, item, world.counter("a", 9))
         with pytest.raises(ViewClosedError):
             tx.insert(TABLE, world.counter("b", 9), world.chunk)
-        assert tx.state is ViewState.CONFLICTED
+        assert tx.state is TxState.CONFLICTED
         assert world.value_now(item) == 3
 
     async def test_conflicted_can_abort(self, world: World) -> None:
         tx, _ = await self._conflicted(world)
         tx.abort()
-        assert tx.state is ViewState.ABORTED
+        assert tx.state is TxState.ABORTED
 
     async def test_aborted_refuses_everything(self, world: World) -> None:
         ids = await world.seed(a=1)
         tx = world.peer.begin()
         tx.update(TABLE, ids["a"], world.counter("a", 2))
         tx.abort()
-        assert tx.state is ViewState.ABORTED
+        assert tx.state is TxState.ABORTED
         assert tx.changes == []
         with pytest.raises(ViewClosedError, match="ABORTED -> VALIDATING"):
             await tx.commit()
@@ -815,6 +815,6 @@ class TestViewState:
         with pytest.raises(ConflictError) as caught:
             await tx.commit()
         caught.value.merge()
-        assert tx.state is ViewState.ABORTED
+        assert tx.state is TxState.ABORTED
         with pytest.raises(ViewClosedError):
             await tx.commit()
