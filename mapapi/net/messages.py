@@ -384,6 +384,49 @@ class Evicted:
     chunk: ChunkId
 
 
+# -- one Raft group per chunk (DESIGN §13) -------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class RaftEntry:
+    """A log entry on the wire (`kind`: `raft_types.EntryKind`'s value)."""
+
+    term: int
+    index: int
+    kind: int
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftMessage:
+    """One message of the chunk's group, between two node ids (see `swarm/groups.py`)."""
+
+    chunk: ChunkId
+    kind: int
+    sender: int
+    to: int
+    term: int
+    log_term: int
+    index: int
+    entries: tuple[RaftEntry, ...]
+    commit: int
+    reject: bool
+    reject_hint: int
+    has_snapshot: bool
+    snap_index: int
+    snap_term: int
+    snap_config: bytes
+    snap_data: bytes
+    context: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftBatch:
+    """All a peer has for another from every group they share, as one notification."""
+
+    messages: tuple[RaftMessage, ...]
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -422,4 +465,5 @@ SWARM_BODIES: dict[str, type] = {
     "evict_grant": EvictGrant,
     "evict_commit": EvictCommit,
     "evicted": Evicted,
+    "raft_batch": RaftBatch,
 }

@@ -1,0 +1,428 @@
+"""The multi-Raft shell: one Raft group per chunk this peer holds (DESIGN §13).
+
+`RaftGroups` drives a pure `RaftNode` (`swarm/raft.py`) per chunk through the
+Ready loop: it persists each `Ready` in the store (`Store.raft_save`) before
+sending its messages, applies committed entries through the `apply` hook in the
+same store transaction that records the applied index (so an entry's effect
+lands once, even across a crash), and resolves the futures of proposals once
+their entry applies. One ticker drives every group; all messages for one peer
+leave in one `RaftBatch` notification per round, so the heartbeats of many
+shared groups cost one frame per pair of peers.
+
+Node ids: the core numbers nodes with positive ints; a peer's node id is the top
+63 bits of its 128-bit `PeerId` (`node_id`), the same in every group and on
+every peer, so configurations in the logs name peers, never addresses. The
+address to send to comes from the member list at send time, so a peer that
+restarts on another port is reached as soon as the swarm knows its new address.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import random
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from mapapi.core.errors import MapError, PeerUnavailable, RequestTimeout
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.net.messages import RaftBatch, RaftEntry, RaftMessage
+from mapapi.net.rpc import Request, Rpc
+from mapapi.store.base import LogRow, ReplicaStore
+from mapapi.swarm.raft import RaftNode
+from mapapi.swarm.raft_types import (
+    NONE,
+    Config,
+    Entry,
+    EntryKind,
+    HardState,
+    Message,
+    MessageKind,
+    NotLeader,
+    PersistentState,
+    RaftOptions,
+    Ready,
+    Role,
+    Snapshot,
+)
+
+log = logging.getLogger(__name__)
+
+TICK_SECONDS = 0.05
+"""Seconds per Raft tick: with the core's election timeout of 10-20 ticks, a dead
+leader is replaced in 0.5-1 s, and heartbeats leave every 50 ms."""
+PROPOSE_TIMEOUT = 5.0
+"""Seconds a proposal waits to be committed and applied."""
+
+ApplyFn = Callable[[ChunkId, Entry], None]
+"""Applies one committed NORMAL entry of a chunk's log to the store (called inside
+`store.exclusive()`, with the applied index recorded in the same transaction)."""
+AddressFn = Callable[[PeerId], str]
+"""Where a peer is reached now (the member list); raises `PeerUnavailable`."""
+
+
+def node_id(peer: PeerId) -> int:
+    """The peer's node id in every group: the top 63 bits of its id (never 0, the
+    core's "no node"; 63 bits so it fits SQLite's signed integers)."""
+    return (int.from_bytes(peer.to_bytes(), "big") >> 65) or 1
+
+
+class ProposalLost(MapError):
+    """A proposal's log entry was overwritten by a new leader before it committed:
+    it did not take effect, and may be proposed again."""
+
+    retriable = True
+    code = 46
+    exit_code = 5
+
+
+class NotChunkLeader(MapError):
+    """A proposal reached a peer that does not lead the chunk's group."""
+
+    retriable = True
+    code = 47
+    exit_code = 5
+
+    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
+        self.chunk, self.leader = chunk, leader
+        where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
+        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}; retry there")
+
+
+@dataclass
+class _Group:
+    """One chunk's node and the proposals waiting for their entries to apply."""
+
+    chunk: ChunkId
+    node: RaftNode
+    waiting: dict[int, tuple[int, asyncio.Future[int]]] = field(default_factory=dict)
+    role: Role = Role.FOLLOWER
+    leader: int = NONE
+
+
+class RaftGroups:
+    """Every Raft group of this peer (see the module docstring).
+
+    Args:
+        me: this peer.
+        store: where each group's state and log persist.
+        rpc: sends and receives `RaftBatch` notifications (registered here).
+        address: where a peer is reached now.
+        apply: applies a committed entry's effect to the store.
+        peers: every peer a node id may stand for (the member list), to map ids back.
+        options: the core's tunables; `seed` makes election timeouts reproducible.
+        on_change: called after every round of the Ready loop that changed a
+            group's role or leader, or sent messages (so waiters re-check).
+    """
+
+    def __init__(
+        self,
+        me: PeerId,
+        store: ReplicaStore,
+        rpc: Rpc,
+        address: AddressFn,
+        apply: ApplyFn,
+        peers: Callable[[], Iterable[PeerId]],
+        options: RaftOptions | None = None,
+        seed: int | None = None,
+        on_change: Callable[[], None] | None = None,
+    ) -> None:
+        self.me = me
+        self.store = store
+        self.rpc = rpc
+        self._address = address
+        self._apply = apply
+        self._peers = peers
+        self._options = options or RaftOptions()
+        self._rng = random.Random(seed)
+        self._on_change = on_change or (lambda: None)
+        self._groups: dict[ChunkId, _Group] = {}
+        self._outbox: dict[int, list[RaftMessage]] = {}
+        self._by_node: dict[int, PeerId] = {}
+        self.frames_sent = 0  # RaftBatch notifications ...
+        self.messages_sent = 0  # ... and the Raft messages they carried
+        self._ticker: asyncio.Task[None] | None = None
+        rpc.register(RaftBatch, self.rpc_raft_batch)
+
+    # -- lifecycle ---------------------------------------------------------------------
+    def start(self, tick: float = TICK_SECONDS) -> None:
+        """Start ticking every group (on the running loop)."""
+        self._ticker = asyncio.get_running_loop().create_task(self._tick_forever(tick))
+
+    async def close(self) -> None:
+        """Stop ticking; proposals still waiting fail with `PeerUnavailable`."""
+        if self._ticker is not None:
+            self._ticker.cancel()
+            await asyncio.gather(self._ticker, return_exceptions=True)
+            self._ticker = None
+        for group in self._groups.values():
+            _fail_all(group, PeerUnavailable("this peer is closing"))
+
+    def found(self, chunk: ChunkId, voters: Iterable[PeerId]) -> None:
+        """Found the chunk's group with these voters (every founding member calls
+        this with the same voters; a group of one leads at once).
+
+        Raises:
+            ValueError: this peer already has the chunk's group.
+        """
+        if chunk in self._groups or self.store.raft_load(chunk) is not None:
+            raise ValueError(f"chunk {chunk} already has a Raft group here")
+        config = Config(frozenset(node_id(p) for p in voters))
+        self._open(chunk, PersistentState.bootstrap(config), applied=1)
+        self.store.raft_save(chunk, hard=(1, NONE, 1), entries=_rows(_bootstrap_entries(config)))
+        self.store.raft_applied(chunk, 1)
+        if config.voters == {node_id(self.me)}:
+            self._groups[chunk].node.campaign()
+            self._process(self._groups[chunk])
+            self._flush()
+
+    def resume(self, chunk: ChunkId) -> bool:
+        """Reopen the chunk's group from the store after a restart; False if this
+        peer persisted none (it joins the group empty with `join`)."""
+        kept = self.store.raft_load(chunk)
+        if kept is None:
+            return False
+        snapshot = Snapshot(
+            kept.snap_index, kept.snap_term, Config.decode(kept.snap_config or b";"), kept.snap_data
+        )
+        entries = tuple(Entry(e.term, e.index, EntryKind(e.kind), e.data) for e in kept.entries)
+        state = PersistentState(HardState(kept.term, kept.vote, kept.commit), snapshot, entries)
+        self._open(chunk, state, applied=kept.applied)
+        return True
+
+    def join(self, chunk: ChunkId) -> None:
+        """Take part in an existing group as a new, empty member: the leader sends
+        it the log (after a member proposed it with `propose_conf_change`)."""
+        self.store.raft_save(chunk, hard=(0, NONE, 0))
+        self._open(chunk, PersistentState(), applied=0)
+
+    def _open(self, chunk: ChunkId, state: PersistentState, applied: int) -> None:
+        node = RaftNode(
+            node_id(self.me),
+            state,
+            random.Random(self._rng.getrandbits(64)),
+            self._options,
+            applied=applied,
+        )
+        self._groups[chunk] = _Group(chunk, node)
+
+    # -- reading the groups ------------------------------------------------------------
+    def leader(self, chunk: ChunkId) -> PeerId | None:
+        """The chunk's leader as this peer knows it, or None during an election."""
+        group = self._groups.get(chunk)
+        return None if group is None else self._peer(group.leader)
+
+    def is_leader(self, chunk: ChunkId) -> bool:
+        """Whether this peer leads the chunk's group now."""
+        group = self._groups.get(chunk)
+        return group is not None and group.role is Role.LEADER
+
+    def applied(self, chunk: ChunkId) -> int:
+        """The last log index applied to this peer's store."""
+        kept = self.store.raft_load(chunk)
+        return 0 if kept is None else kept.applied
+
+    # -- proposing ---------------------------------------------------------------------
+    async def propose(self, chunk: ChunkId, data: bytes, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
+        """Append `data` to the chunk's log here (this peer must lead) and wait
+        until it is committed and applied here; returns its index.
+
+        Raises:
+            NotChunkLeader: another peer leads, or none does yet.
+            ProposalLost: a new leader overwrote the entry before it committed.
+            RequestTimeout: not committed within `timeout` (no quorum reachable).
+        """
+        group = self._group(chunk)
+        try:
+            index, term = group.node.propose(data)
+        except NotLeader as exc:
+            raise NotChunkLeader(chunk, self._peer(exc.leader)) from None
+        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        group.waiting[index] = (term, done)
+        self._process(group)
+        self._flush()
+        try:
+            async with asyncio.timeout(timeout):
+                return await done
+        except TimeoutError:
+            group.waiting.pop(index, None)
+            raise RequestTimeout(
+                f"chunk {chunk.short}: entry {index} not committed within {timeout:g} s "
+                "(too few voters reachable)"
+            ) from None
+
+    def _group(self, chunk: ChunkId) -> _Group:
+        group = self._groups.get(chunk)
+        if group is None:
+            raise NotChunkLeader(chunk, None)
+        return group
+
+    # -- the Ready loop ----------------------------------------------------------------
+    async def _tick_forever(self, tick: float) -> None:
+        while True:
+            await asyncio.sleep(tick)
+            for group in list(self._groups.values()):
+                group.node.tick()
+                self._process(group)
+            self._flush()
+
+    def rpc_raft_batch(self, req: Request) -> None:
+        """Step every message of a batch into its group (unknown groups are skipped:
+        a message may arrive before `join` or after the chunk was dropped)."""
+        batch: RaftBatch = req.body
+        sender = node_id(req.sender)
+        touched: dict[ChunkId, _Group] = {}
+        for wire in batch.messages:
+            group = self._groups.get(wire.chunk)
+            if group is None or wire.to != node_id(self.me):
+                continue
+            if wire.sender != sender:  # a node speaks only for itself
+                log.warning("refused a raft message of node %d from %s", wire.sender, req.sender)
+                continue
+            try:
+                message = _from_wire(wire)
+            except ValueError as exc:
+                log.warning("refused a malformed raft message from %s: %s", req.sender.short, exc)
+                continue
+            group.node.step(message)
+            touched[group.chunk] = group
+        for group in touched.values():
+            self._process(group)
+        self._flush()
+
+    def _process(self, group: _Group) -> None:
+        """Run the Ready loop of one group until it has nothing more to do."""
+        while group.node.has_ready():
+            rd = group.node.ready()
+            self._persist(group.chunk, rd)
+            for message in rd.messages:
+                self._outbox.setdefault(message.to, []).append(_to_wire(group.chunk, message))
+            self._apply_committed(group, rd.committed_entries)
+            if (rd.role, rd.leader) != (group.role, group.leader):
+                group.role, group.leader = rd.role, rd.leader
+                log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
+                self._on_change()
+            group.node.advance(rd)
+
+    def _persist(self, chunk: ChunkId, rd: Ready) -> None:
+        if rd.snapshot is None and not rd.entries and rd.hard_state is None:
+            return
+        hs = rd.hard_state
+        snap = rd.snapshot
+        self.store.raft_save(
+            chunk,
+            hard=None if hs is None else (hs.term, hs.vote, hs.commit),
+            entries=_rows(rd.entries),
+            snapshot=None
+            if snap is None
+            else (snap.index, snap.term, snap.config.encode(), snap.data),
+        )
+
+    def _apply_committed(self, group: _Group, entries: tuple[Entry, ...]) -> None:
+        if not entries:
+            return
+        with self.store.exclusive():
+            for entry in entries:
+                if entry.kind is EntryKind.NORMAL:
+                    self._apply(group.chunk, entry)
+            self.store.raft_applied(group.chunk, entries[-1].index)
+        for entry in entries:
+            waiting = group.waiting.pop(entry.index, None)
+            if waiting is None:
+                continue
+            term, done = waiting
+            if done.done():
+                continue
+            if term == entry.term:
+                done.set_result(entry.index)
+            else:
+                done.set_exception(
+                    ProposalLost(f"chunk {group.chunk.short}: entry {entry.index} was replaced")
+                )
+
+    def _flush(self) -> None:
+        """Send each peer its messages of every group, as one notification."""
+        outbox, self._outbox = self._outbox, {}
+        if outbox:
+            self._on_change()
+        for to, messages in outbox.items():
+            peer = self._peer(to)
+            if peer is None:
+                log.debug("no known peer for node %d; %d message(s) dropped", to, len(messages))
+                continue
+            try:
+                self.rpc.notify(self._address(peer), RaftBatch(tuple(messages)))
+                self.frames_sent += 1
+                self.messages_sent += len(messages)
+            except MapError as exc:  # Raft retries by itself: a lost message is a late one
+                log.debug("raft messages to %s not sent: %s", peer.short, exc)
+
+    def _peer(self, node: int) -> PeerId | None:
+        """The peer a node id stands for (the member list, looked up again on a miss)."""
+        if node == NONE:
+            return None
+        if node not in self._by_node:
+            self._by_node = {node_id(p): p for p in self._peers()}
+        return self._by_node.get(node)
+
+
+def _fail_all(group: _Group, error: Exception) -> None:
+    for _, done in group.waiting.values():
+        if not done.done():
+            done.set_exception(error)
+    group.waiting.clear()
+
+
+def _bootstrap_entries(config: Config) -> tuple[Entry, ...]:
+    return PersistentState.bootstrap(config).entries
+
+
+def _rows(entries: Iterable[Entry]) -> list[LogRow]:
+    return [LogRow(e.index, e.term, e.kind.value, e.data) for e in entries]
+
+
+def _to_wire(chunk: ChunkId, m: Message) -> RaftMessage:
+    snap = m.snapshot
+    return RaftMessage(
+        chunk=chunk,
+        kind=m.kind.value,
+        sender=m.sender,
+        to=m.to,
+        term=m.term,
+        log_term=m.log_term,
+        index=m.index,
+        entries=tuple(RaftEntry(e.term, e.index, e.kind.value, e.data) for e in m.entries),
+        commit=m.commit,
+        reject=m.reject,
+        reject_hint=m.reject_hint,
+        has_snapshot=snap is not None,
+        snap_index=snap.index if snap else 0,
+        snap_term=snap.term if snap else 0,
+        snap_config=snap.config.encode() if snap else b"",
+        snap_data=snap.data if snap else b"",
+        context=m.context,
+    )
+
+
+def _from_wire(w: RaftMessage) -> Message:
+    """The core's message (ValueError for an unknown kind: the envelope decoder's
+    ProtocolError path has already bounded every field)."""
+    snapshot = (
+        Snapshot(w.snap_index, w.snap_term, Config.decode(w.snap_config), w.snap_data)
+        if w.has_snapshot
+        else None
+    )
+    return Message(
+        MessageKind(w.kind),
+        w.sender,
+        w.to,
+        w.term,
+        w.log_term,
+        w.index,
+        tuple(Entry(e.term, e.index, EntryKind(e.kind), e.data) for e in w.entries),
+        w.commit,
+        w.reject,
+        w.reject_hint,
+        snapshot,
+        w.context,
+    )
