@@ -22,9 +22,10 @@ from typing import TYPE_CHECKING
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import lookup_pb2, maps_pb2
-from mapapi.core.errors import MapError, QueryError
+from mapapi.core.errors import QueryError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox, SpatialGrid
+from mapapi.net.rpc import ask_all
 
 if TYPE_CHECKING:
     from mapapi.lookup.dht.chord import ChordNode
@@ -117,13 +118,13 @@ def encode_filter(box: BBox, table: str | None = None) -> bytes:
     return bytes(spec.SerializeToString(deterministic=True))
 
 
-def bbox_filter(argument: bytes) -> Callable[[bytes], bool]:
-    """The "bbox" member filter (`ChordNode.register_filter`): keep the entries
-    whose box overlaps the filter's box (and of its table, when it names one).
-    Members that are not spatial entries are dropped.
+def decode_filter(argument: bytes) -> tuple[BBox, str | None]:
+    """The box and table (None: any) of a filter argument `encode_filter` wrote;
+    every member filter that takes a `mapapi.v1.SpatialFilter` parses it here.
 
     Raises:
-        ValueError: the argument is no valid filter.
+        ValueError: the argument is no spatial filter, has no box, or a
+            malformed one (`InvalidBBox` is a ValueError).
     """
     spec = lookup_pb2.SpatialFilter()
     try:
@@ -132,8 +133,18 @@ def bbox_filter(argument: bytes) -> Callable[[bytes], bool]:
         raise ValueError(f"not a spatial filter: {exc}") from exc
     if not spec.HasField("bbox"):
         raise ValueError("a spatial filter needs a box")
-    box = box_of(spec.bbox)
-    table = spec.table
+    return box_of(spec.bbox), spec.table or None
+
+
+def bbox_filter(argument: bytes) -> Callable[[bytes], bool]:
+    """The "bbox" member filter (`ChordNode.register_filter`): keep the entries
+    whose box overlaps the filter's box (and of its table, when it names one).
+    Members that are not spatial entries are dropped.
+
+    Raises:
+        ValueError: the argument is no valid filter.
+    """
+    box, table = decode_filter(argument)
 
     def keep(member: bytes) -> bool:
         try:
@@ -255,16 +266,13 @@ class SpatialIndex:
                 return await self.chord.get(self.grid.cell_key(cell, self.name), filter, argument)
 
         before = self.chord.requests_sent
-        answers = await asyncio.gather(*(ask(c) for c in cells), return_exceptions=True)
+        answers = await ask_all({c: ask(c) for c in cells})
         stats.requests += self.chord.requests_sent - before
+        for cell, error in answers.failed.items():
+            log.warning("cell %d of index %r did not answer: %s", cell, self.name, error)
+            stats.failed_cells.append(cell)
         members: list[bytes] = []
-        for cell, answer in zip(cells, answers, strict=True):
-            if isinstance(answer, BaseException):
-                if not isinstance(answer, MapError):
-                    raise answer
-                log.warning("cell %d of index %r did not answer: %s", cell, self.name, answer)
-                stats.failed_cells.append(cell)
-                continue
+        for answer in answers.ok.values():
             stats.transferred += len(answer)
             members.extend(answer)
         if cells and len(stats.failed_cells) == len(cells):

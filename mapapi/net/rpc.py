@@ -18,9 +18,9 @@ import asyncio
 import inspect
 import itertools
 import logging
-from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
-from typing import Any, TypeVar, overload
+from collections.abc import Awaitable, Callable, Hashable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar, overload
 
 from mapapi.core.errors import (
     AccessRefused,
@@ -37,6 +37,7 @@ from mapapi.net.transport import Inbound, Transport
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
+K = TypeVar("K", bound=Hashable)
 
 DEFAULT_TIMEOUT = 5.0
 # What to do when this peer's own side closes (`peer stop`, a shutdown) under a request.
@@ -68,9 +69,17 @@ class Rpc:
     Args:
         transport: the message transport (e.g. `ZmqTransport`), not yet started.
         default_timeout: deadline in seconds for `request()` without `timeout`.
+        on_seen: called with the sender of every message that arrives (the
+            swarm's proof of life for its failure detector).
     """
 
-    def __init__(self, transport: Transport, *, default_timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        default_timeout: float = DEFAULT_TIMEOUT,
+        on_seen: Callable[[PeerId], None] | None = None,
+    ) -> None:
         self.transport = transport
         self.default_timeout = default_timeout
         self._handlers: dict[type, Handler] = {}
@@ -78,7 +87,7 @@ class Rpc:
         self._tasks: set[asyncio.Task[None]] = set()
         self._ids = itertools.count(1)
         self._closed = False
-        self.on_seen: Callable[[PeerId], None] | None = None  # called for every message
+        self.on_seen = on_seen
         # Addresses of peers declared dead (`mapapi.swarm.liveness`), each with who
         # answers there ("peer robot2 (146ca670)"): requests to them fail at once
         # instead of waiting out their deadlines, probes excepted.
@@ -339,3 +348,48 @@ async def first_answer(
         for fut in pending:
             fut.cancel()
         await asyncio.gather(*pending, return_exceptions=True)
+
+
+@dataclass(frozen=True, slots=True)
+class Answers(Generic[K, T]):
+    """What `ask_all` gathered, by key, in the order the calls were given.
+
+    Attributes:
+        ok: the answers of the calls that succeeded.
+        failed: the MapError of each call that failed (a peer that did not answer,
+            or refused).
+    """
+
+    ok: dict[K, T] = field(default_factory=dict)
+    failed: dict[K, MapError] = field(default_factory=dict)
+
+    def raise_first(self) -> None:
+        """Raise the first failure, in the order the calls were given, if any.
+
+        Raises:
+            MapError: that failure.
+        """
+        for error in self.failed.values():
+            raise error
+
+
+async def ask_all(calls: Mapping[K, Awaitable[T]]) -> Answers[K, T]:
+    """Run `calls` (requests to several peers, say, keyed by peer) at once and
+    wait for every one; a call failing with a MapError does not stop the others.
+    The caller then raises the first failure (`Answers.raise_first`) or logs them.
+
+    Raises:
+        Exception: the first failure that is no MapError (a bug), once every call
+            has finished; cancelling `ask_all` cancels the calls.
+    """
+    keys = list(calls)
+    results = await asyncio.gather(*calls.values(), return_exceptions=True)
+    answers: Answers[K, T] = Answers()
+    for key, result in zip(keys, results, strict=True):
+        if isinstance(result, MapError):
+            answers.failed[key] = result
+        elif isinstance(result, BaseException):
+            raise result
+        else:
+            answers.ok[key] = result
+    return answers

@@ -41,7 +41,6 @@ from typing import TYPE_CHECKING, Any
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import (
     DaemonDied,
-    MapError,
     NetworkError,
     NotOwner,
     PeerNotRunning,
@@ -52,7 +51,7 @@ from mapapi.core.errors import (
 from mapapi.core.ids import PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import ChunkList, ChunkListQuery, ChunkSummary, ControlCall, ControlResult
-from mapapi.net.rpc import Request, Rpc
+from mapapi.net.rpc import Request, Rpc, ask_all
 from mapapi.net.transport import ZmqTransport
 
 if TYPE_CHECKING:
@@ -391,15 +390,7 @@ async def ask_chunk_lists(peer: Peer) -> dict[PeerId, list[ChunkSummary]]:
         raise PeerNotRunning("no peer runs on this repository; start it with `mapctl peer start`")
     rpc = peer.swarm.rpc
     members = [s.member for s in peer.members()]
-    answers = await asyncio.gather(
-        *(ask_chunk_list(m.address, rpc=rpc) for m in members), return_exceptions=True
-    )
-    found: dict[PeerId, list[ChunkSummary]] = {}
-    for member, answer in zip(members, answers, strict=True):
-        if isinstance(answer, MapError):
-            log.warning("peer %s did not list its chunks: %s", member.id.short, answer)
-        elif isinstance(answer, BaseException):
-            raise answer
-        else:
-            found[member.id] = answer
-    return found
+    answers = await ask_all({m.id: ask_chunk_list(m.address, rpc=rpc) for m in members})
+    for member, error in answers.failed.items():
+        log.warning("member %s did not list its chunks: %s", member.short, error)
+    return answers.ok

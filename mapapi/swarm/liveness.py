@@ -4,9 +4,10 @@
 as a heartbeat (the RPC layer reports each one through `heard`); every
 `interval` the peers that share a chunk with this one and were quiet that long
 get a `Ping`, and the detector re-evaluates them all. When a peer is declared
-dead its pending requests fail at once, and the owner's `on_tick` callback
-(`Recovery.tick`) sees the new state; when a dead peer is heard of again,
-`on_back` is called with it; `on_down` is called when one is declared down.
+dead its pending requests fail at once. Its owner, given at construction as
+`LivenessEvents`, hears when a peer is declared down and when a dead one is
+heard of again, sees every round's new state (to evict, `Recovery.tick`), and
+names peers to watch besides the co-holders.
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Protocol
 
 from mapapi.core.errors import MapError
 from mapapi.core.ids import PeerId
@@ -45,8 +47,32 @@ class LivenessOptions:
     dead_after: float = DEAD_AFTER
 
 
+class LivenessEvents(Protocol):
+    """What a `Liveness` reports to its owner (the swarm), and asks of it."""
+
+    def peer_down(self, peer: PeerId) -> None:
+        """`peer` was declared down (here, or by the quorum that evicted it)."""
+
+    def peer_back(self, peer: PeerId) -> None:
+        """`peer`, declared dead before, was heard of again."""
+
+    def round_done(self) -> None:
+        """A round re-evaluated every watched peer (act on who is dead now)."""
+
+    def also_watch(self) -> Iterable[PeerId]:
+        """Peers to watch besides the co-holders (those evicted, to see them back)."""
+
+
 class Liveness:
-    """Heartbeats and failure detection for one peer (see the module docstring)."""
+    """Heartbeats and failure detection for one peer (see the module docstring).
+
+    Args:
+        rpc: the peer's endpoint (pings leave through it; `rpc.down` is kept here).
+        members: who is who, and where.
+        store: the chunks' holder sets (the co-holders are the peers watched).
+        options: timing.
+        events: told of what the detector decides (None: nobody listens).
+    """
 
     def __init__(
         self,
@@ -54,6 +80,8 @@ class Liveness:
         members: Members,
         store: ReplicaStore,
         options: LivenessOptions | None = None,
+        *,
+        events: LivenessEvents | None = None,
     ) -> None:
         self.rpc = rpc
         self.members = members
@@ -64,11 +92,7 @@ class Liveness:
             self.options.dead_after,
             pause_after=2 * self.options.interval,
         )
-        self.on_tick: Callable[[], None] | None = None
-        self.on_back: Callable[[PeerId], None] | None = None
-        self.on_down: Callable[[PeerId], None] | None = None
-        # Peers to watch besides the co-holders (those evicted, to see them back).
-        self.also_watch: Callable[[], Iterable[PeerId]] = lambda: ()
+        self.events = events
         self._task: asyncio.Task[None] | None = None
         self._pings: dict[PeerId, asyncio.Task[None]] = {}
 
@@ -95,8 +119,8 @@ class Liveness:
             who = f"peer {self.members.label(peer)}"
             self.rpc.down[member.address] = who
             self.rpc.fail_pending(member.address, f"{who} is down")
-        if self.on_down is not None:
-            self.on_down(peer)
+        if self.events is not None:
+            self.events.peer_down(peer)
 
     def is_dead(self, peer: PeerId) -> bool:
         """Whether `peer` is declared dead (silent for `dead_after` seconds)."""
@@ -117,15 +141,15 @@ class Liveness:
     def tick(self) -> None:
         """One round: watch the co-holders, re-evaluate them, ping the quiet ones."""
         now = time.monotonic()
-        watched = self.co_holders() | set(self.also_watch())
+        watched = self.co_holders() | set(self.events.also_watch() if self.events else ())
         for peer in set(self.detector.watched()) - watched:
             self.detector.unwatch(peer)
         for peer in watched:
             self.detector.watch(peer, now)
         for change in self.detector.tick(now):
             self._report(change)
-        if self.on_tick is not None:
-            self.on_tick()
+        if self.events is not None:
+            self.events.round_done()
         for peer in watched:
             quiet = self.detector.silent_for(peer, now) >= self.options.interval
             if quiet and peer not in self._pings:
@@ -155,8 +179,8 @@ class Liveness:
         )
         if change.after is Health.DEAD:
             self.mark_down(change.peer)
-        elif change.before is Health.DEAD and self.on_back is not None:
-            self.on_back(change.peer)
+        elif change.before is Health.DEAD and self.events is not None:
+            self.events.peer_back(change.peer)
 
     async def _run(self) -> None:
         while True:

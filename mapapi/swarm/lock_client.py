@@ -53,16 +53,20 @@ class LockService:
         *,
         lease: float = 5.0,
         lock_timeout: float = DEFAULT_LOCK_TIMEOUT,
+        admit: Callable[[ChunkId, PeerId], None] | None = None,
+        is_down: Callable[[PeerId], bool] | None = None,
+        on_overdue: Callable[[ChunkId, Grant], None] | None = None,
+        on_not_holder: Callable[[ChunkId, PeerId], None] | None = None,
     ) -> None:
         self.rpc = rpc
         # Who may ask for a chunk's lock (the swarm admits its holders only).
-        self.admit: Callable[[ChunkId, PeerId], None] | None = None
+        self.admit = admit
         # Whether a holder is believed down (its requests fail fast instead of
         # waiting out their deadline), and who settles an overdue pinned lease.
-        self.is_down: Callable[[PeerId], bool] = lambda peer: False
-        self.on_overdue: Callable[[ChunkId, Grant], None] | None = None
+        self.is_down: Callable[[PeerId], bool] = is_down or (lambda peer: False)
+        self.on_overdue = on_overdue
         # Told when a holder refuses this peer as no holder of a chunk (it was evicted).
-        self.on_not_holder: Callable[[ChunkId, PeerId], None] | None = None
+        self.on_not_holder = on_not_holder
         self.members = members
         self.table = LockTable(lease)
         self.lock_timeout = lock_timeout

@@ -14,24 +14,26 @@ from __future__ import annotations
 import asyncio
 import logging
 import random
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from mapapi.core import limits
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import JoinRefused, MapError, UsageError
-from mapapi.core.ids import PeerId
+from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.chunk_places import ChunkPlaces
 from mapapi.lookup.dht.chord import ChordNode
 from mapapi.lookup.spatial import SpatialGrid
 from mapapi.lookup.spatial_index import SpatialIndex
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
-from mapapi.net.rpc import Request, Rpc
+from mapapi.net.rpc import Request, Rpc, ask_all
 from mapapi.net.security import Security, own_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.liveness import Liveness, LivenessOptions
+from mapapi.swarm.lock import Grant
 from mapapi.swarm.lock_client import LockService
 from mapapi.swarm.membership import Members
 from mapapi.swarm.recovery import Recovery
@@ -83,14 +85,27 @@ class Swarm:
         security: Security | None = None,
     ) -> None:
         self.security = security
-        self.rpc = Rpc(ZmqTransport(peer_id, clock, shaper=shaper, security=security))
+        transport = ZmqTransport(peer_id, clock, shaper=shaper, security=security)
+        self.rpc = Rpc(transport, on_seen=self._seen)
         self.grid = grid or SpatialGrid()
         self.places = places or ChunkPlaces(store)
         self.index: SpatialIndex | None = None  # made by `start()`, over the ring
         self._name = name
         self._peer_id = peer_id
         self.members = Members(Member(peer_id, "", name))
-        self.locks = LockService(self.rpc, self.members, lease=lease)
+        # The parts report to each other in a circle (the lock table asks liveness
+        # who is down, liveness tells recovery and the lock table, recovery drives
+        # both), so what one reports goes to a method of this swarm, given at
+        # construction, that hands it to the part that acts on it.
+        self.locks = LockService(
+            self.rpc,
+            self.members,
+            lease=lease,
+            admit=self._admit,
+            is_down=self._is_down,
+            on_overdue=self._overdue,
+            on_not_holder=self._not_holder,
+        )
         self.chord_options = chord or ChordOptions()
         self.replicator = Replicator(
             self.rpc,
@@ -98,28 +113,54 @@ class Swarm:
             self.locks,
             store,
             holder_ttl=self.chord_options.holder_ttl,
+            places=self.places,
         )
         self._chord: ChordNode | None = None  # made by `start()`: it needs the address
         self.subscriptions = Subscriptions(
-            self.rpc, lambda: self.members.me, store, self.chord_options.holder_ttl
+            self.rpc, self.members, store, self.chord_options.holder_ttl
         )
-        self.locks.admit = self.replicator.admit
-        self.liveness = Liveness(self.rpc, self.members, store, liveness)
-        self.locks.is_down = self.liveness.is_dead
-        self.liveness.on_down = self.locks.writer_down
+        self.liveness = Liveness(self.rpc, self.members, store, liveness, events=self)
         self.recovery = Recovery(
             self.rpc, self.members, self.locks, store, self.replicator, self.liveness
         )
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))
-        self.rpc.on_seen = self._seen
         self._merging: asyncio.Task[None] | None = None
 
+    # -- what the parts report (see `__init__`) ---------------------------------------
     def _seen(self, peer: PeerId) -> None:
         """A message from `peer` arrived: it is alive, and a member is seen now."""
         self.members.touch(peer)
         self.liveness.heard(peer)
+
+    def _admit(self, chunk: ChunkId, writer: PeerId) -> None:
+        self.replicator.admit(chunk, writer)
+
+    def _is_down(self, peer: PeerId) -> bool:
+        return self.liveness.is_dead(peer)
+
+    def _overdue(self, chunk: ChunkId, grant: Grant) -> None:
+        self.recovery.overdue(chunk, grant)
+
+    def _not_holder(self, chunk: ChunkId, holder: PeerId) -> None:
+        self.recovery.not_holder(chunk, holder)
+
+    def peer_down(self, peer: PeerId) -> None:
+        """`LivenessEvents`: wake the writers queued behind `peer`'s locks."""
+        self.locks.writer_down(peer)
+
+    def peer_back(self, peer: PeerId) -> None:
+        """`LivenessEvents`: tell `peer` of the chunks it was evicted from."""
+        self.recovery.back(peer)
+
+    def round_done(self) -> None:
+        """`LivenessEvents`: evict the dead holders where this peer acts."""
+        self.recovery.tick()
+
+    def also_watch(self) -> Iterable[PeerId]:
+        """`LivenessEvents`: the peers this one evicted, to see them back."""
+        return self.recovery.evicted()
 
     @property
     def address(self) -> str:
@@ -143,7 +184,6 @@ class Swarm:
         self._chord.start()
         self.replicator.index_on(self._chord)
         self.index = SpatialIndex(self._chord, self.grid)
-        self.replicator.places = self.places
         self.places.start(
             self._chord, self.index, options.holder_ttl, lambda: (self._peer_id, self.address)
         )
@@ -202,6 +242,16 @@ class Swarm:
         self.members.touch(member.id)
         return Welcome(tuple(self.members.all()))
 
+    async def call_hello(self, address: str) -> Welcome:
+        """Introduce this peer to the member at `address` (its `rpc_hello`); its Welcome.
+
+        Raises:
+            JoinRefused: it refused (another spatial index, or a forged Hello).
+            NetworkError: it did not answer in time.
+        """
+        hello = Hello(self.members.me, self.grid.config_fingerprint())
+        return await self.rpc.request(address, hello, expect=Welcome)
+
     def rpc_bye(self, req: Request) -> Ack:
         """A peer leaves the swarm gracefully (and the ring: route around it)."""
         member = self.members.get(req.sender)
@@ -210,6 +260,10 @@ class Swarm:
             self._chord.forget(member.address)
         return Ack()
 
+    async def call_bye(self, address: str) -> None:
+        """Tell the member at `address` that this peer leaves (its `rpc_bye`)."""
+        await self.rpc.request(address, Bye(), timeout=1.0, expect=Ack)
+
     async def join(self, seed: str) -> list[Member]:
         """Join the swarm through the member at `seed`; returns every member.
 
@@ -217,26 +271,21 @@ class Swarm:
             JoinRefused: the seed refused, or answered like no mapapi peer.
             NetworkError: the seed did not answer in time.
         """
-        hello = Hello(self.members.me, self.grid.config_fingerprint())
         try:
-            welcome = await self.rpc.request(seed, hello, expect=Welcome)
+            welcome = await self.call_hello(seed)
         except MapError:
             await self.rpc.forget(seed)  # no reconnecting socket left behind
             raise
         if not any(m.address == seed or m.id != self._peer_id for m in welcome.members):
             raise JoinRefused(f"{seed} answered with no members")
         fresh = [m for m in welcome.members if m.id != self._peer_id and self.members.add(m)]
-        results = await asyncio.gather(
-            *(self.rpc.request(m.address, hello, expect=Welcome) for m in fresh),
-            return_exceptions=True,
-        )
-        for member, result in zip(fresh, results, strict=True):
-            if isinstance(result, MapError):
-                log.warning("member %s at %s did not answer: %s", member.id, member.address, result)
-            elif isinstance(result, Welcome):
-                for other in result.members:
-                    if other.id != self._peer_id:
-                        self.members.add(other)
+        answers = await ask_all({m: self.call_hello(m.address) for m in fresh})
+        for member, error in answers.failed.items():
+            log.warning("member %s at %s did not answer: %s", member.id, member.address, error)
+        for answer in answers.ok.values():
+            for other in answer.members:
+                if other.id != self._peer_id:
+                    self.members.add(other)
         await self._join_ring(seed)
         return self.members.all()
 
@@ -269,13 +318,11 @@ class Swarm:
                     await self._chord.leave()
         except (MapError, TimeoutError) as exc:
             log.warning("left the lookup ring uncleanly (entries expire by themselves): %r", exc)
-        await asyncio.gather(
-            *(
-                self.rpc.request(s.member.address, Bye(), timeout=1.0)
-                for s in self.members.others()
-            ),
-            return_exceptions=True,
+        told = await ask_all(
+            {s.member.id: self.call_bye(s.member.address) for s in self.members.others()}
         )
+        for peer, error in told.failed.items():  # it sees this peer go silent instead
+            log.debug("member %s did not hear Bye: %s", peer.short, error)
 
     async def close(self) -> None:
         """Stop renewals and the ring's tasks, and close the endpoint (fails

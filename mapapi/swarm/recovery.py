@@ -38,7 +38,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Coroutine, Sequence
+from collections.abc import Coroutine, Iterable, Sequence
 from typing import Any
 
 from mapapi.core.errors import MapError, NotParticipatingError, PeerUnavailable, UsageError
@@ -57,7 +57,7 @@ from mapapi.net.messages import (
     StagedBatch,
     Unlock,
 )
-from mapapi.net.rpc import Request, Rpc
+from mapapi.net.rpc import Answers, Request, Rpc, ask_all
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.commit_check import check_batch
 from mapapi.swarm.liveness import Liveness
@@ -103,11 +103,6 @@ class Recovery:
             (Evicted, self.rpc_evicted),
         ):
             rpc.register(body, handler)
-        locks.on_overdue = self._overdue
-        locks.on_not_holder = self.not_holder
-        liveness.on_tick = self.tick
-        liveness.on_back = self._back
-        liveness.also_watch = self._evicted.keys
 
     @property
     def me(self) -> PeerId:
@@ -178,18 +173,20 @@ class Recovery:
             batches = {
                 b.record.id: _wire(b.record, b.revisions) for b in self.replicator.staged(chunk)
             }
-            answers = await self._ask_each(others, EvictRequest(chunk, tuple(dead)))
-            for peer, answer in zip(others, answers, strict=True):
+            answers = await self._ask_all(others, EvictRequest(chunk, tuple(dead)))
+            for peer, answer in answers.ok.items():
                 if isinstance(answer, EvictGrant):  # given back below if another refused
                     tokens[peer] = answer.token
                     batches.update((b.record.id, b) for b in answer.staged)
-                elif isinstance(answer, NotParticipatingError):
+            for peer, error in answers.failed.items():
+                if isinstance(error, NotParticipatingError):
                     self.not_holder(chunk, peer)  # we are the one who was evicted
-            _raise_first(answers)
+            answers.raise_first()
             apply, drop = await self._decide(chunk, batches, others)
-            await self._ask_all(
+            settled = await self._ask_all(
                 others, lambda p: EvictCommit(chunk, tokens[p], tuple(dead), apply, drop)
             )
+            settled.raise_first()
             tokens = {self.me: tokens[self.me]}  # the others released with the EvictCommit
             self._settle(chunk, dead, apply, drop)
         finally:
@@ -206,25 +203,15 @@ class Recovery:
             len(drop),
         )
 
-    async def _ask_all(self, peers: Sequence[PeerId], body: Any) -> list[object]:
-        """Send each peer `body` (or `body(peer)`) and wait for every answer.
-
-        Raises:
-            MapError: the first failure, once every request has finished.
-        """
-        answers = await self._ask_each(peers, body)
-        _raise_first(answers)
-        return answers
-
-    async def _ask_each(self, peers: Sequence[PeerId], body: Any) -> list[object]:
-        """`_ask_all`, with each failure in its place among the answers."""
+    async def _ask_all(self, peers: Sequence[PeerId], body: Any) -> Answers[PeerId, object]:
+        """Send each peer `body` (or `body(peer)`) and wait for every answer (or failure)."""
 
         async def ask(peer: PeerId) -> object:
             message = body(peer) if callable(body) else body
             timeout = self.locks.lock_timeout + 1.0
             return await self.rpc.request(self.members.address(peer), message, timeout=timeout)
 
-        return await asyncio.gather(*(ask(p) for p in peers), return_exceptions=True)
+        return await ask_all({p: ask(p) for p in peers})
 
     async def _decide(
         self, chunk: ChunkId, batches: dict[CommitId, StagedBatch], others: Sequence[PeerId]
@@ -240,8 +227,9 @@ class Recovery:
             return (), ()
         ids = tuple(sorted(batches))
         answers = await self._ask_all(others, CommitStatusQuery(chunk, ids))
+        answers.raise_first()
         applied = {c for c in ids if self.replicator.applied_here(chunk, c)}
-        for answer in answers:
+        for answer in answers.ok.values():
             assert isinstance(answer, CommitStatus)
             if answer.pending:
                 raise PeerUnavailable(
@@ -326,7 +314,9 @@ class Recovery:
         )
 
     # -- in-doubt commits ---------------------------------------------------------------------
-    def _overdue(self, chunk: ChunkId, grant: Grant) -> None:
+    def overdue(self, chunk: ChunkId, grant: Grant) -> None:
+        """A lease pinned by a staged batch ran out (told by `LockService`): ask
+        its writer how the commit ended, in the background (`resolve`)."""
         self._spawn(("resolve", chunk), self.resolve(chunk, grant))
 
     async def resolve(self, chunk: ChunkId, grant: Grant) -> None:
@@ -370,7 +360,13 @@ class Recovery:
         return now is not None and (now.writer, now.token) == (grant.writer, grant.token)
 
     # -- evicted peers coming back ----------------------------------------------------------
-    def _back(self, peer: PeerId) -> None:
+    def evicted(self) -> Iterable[PeerId]:
+        """The peers this one evicted and has not told yet (watched to see them back)."""
+        return self._evicted.keys()
+
+    def back(self, peer: PeerId) -> None:
+        """`peer`, declared dead before, answers again: tell it of each chunk this
+        peer evicted it from, so it fetches them again."""
         for chunk in sorted(self._evicted.pop(peer, set())):
             self._spawn(("tell", chunk, peer), self._tell_evicted(peer, chunk))
 
@@ -428,12 +424,6 @@ class Recovery:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         self._tasks.clear()
-
-
-def _raise_first(answers: Sequence[object]) -> None:
-    for answer in answers:
-        if isinstance(answer, BaseException):
-            raise answer
 
 
 def _wire(record: CommitRecord, revisions: Sequence[Revision]) -> StagedBatch:

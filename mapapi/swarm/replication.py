@@ -12,7 +12,6 @@ also answers `ChunkListQuery` (lookup by peer).
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -48,7 +47,7 @@ from mapapi.net.messages import (
     ParticipateRequest,
     TableInfo,
 )
-from mapapi.net.rpc import Request, Rpc, first_answer
+from mapapi.net.rpc import Request, Rpc, ask_all, first_answer
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.commit_check import check_batch
 from mapapi.swarm.lock_client import Held, LockService
@@ -104,6 +103,7 @@ class Replicator:
         store: ReplicaStore,
         *,
         holder_ttl: float = HOLDER_TTL,
+        places: ChunkPlaces | None = None,
     ) -> None:
         self.rpc = rpc
         self.members = members
@@ -117,7 +117,7 @@ class Replicator:
         self.chord: ChordNode | None = None  # the lookup index, once `index_on` ran
         self.holder_ttl = holder_ttl
         self.announced = Announcements(self._holder_entries, holder_ttl, "holder")
-        self.places: ChunkPlaces | None = None  # the chunks' boxes, kept current if set
+        self.places = places  # the chunks' boxes, kept current if given
         # called with each commit another peer applies here, in apply order
         self.applied_hooks: list[Callable[[CommitRecord, Sequence[Revision]], None]] = []
         for body, handler in (
@@ -164,6 +164,10 @@ class Replicator:
         )
         return Ack()
 
+    async def call_commit_batch(self, address: str, batch: CommitBatch) -> None:
+        """Stage `batch` at the holder at `address` (its `rpc_commit_batch`)."""
+        await self.rpc.request(address, batch, expect=Ack)
+
     async def rpc_commit_apply(self, req: Request) -> Ack:
         """Apply a staged batch atomically, then release the writer's lock."""
         body: CommitApply = req.body
@@ -177,12 +181,20 @@ class Replicator:
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
 
+    async def call_commit_apply(self, address: str, apply: CommitApply) -> None:
+        """Have the holder at `address` apply a staged batch (its `rpc_commit_apply`)."""
+        await self.rpc.request(address, apply, expect=Ack)
+
     async def rpc_commit_abort(self, req: Request) -> Ack:
         """Drop a staged batch and release the writer's lock."""
         body: CommitAbort = req.body
         self._staged.pop((body.chunk, body.commit_id), None)
         await self.locks.release_local(body.chunk, req.sender, body.token)
         return Ack()
+
+    async def call_commit_abort(self, address: str, abort: CommitAbort) -> None:
+        """Have the holder at `address` drop a staged batch (its `rpc_commit_abort`)."""
+        await self.rpc.request(address, abort, expect=Ack)
 
     def apply_batch(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
         """Apply another peer's commit to this replica and tell whoever watches."""
@@ -235,13 +247,16 @@ class Replicator:
         ]
         self.committing.add(record.id)
         try:
-            await _all(
-                self.rpc.request(
-                    self.members.address(peer),
-                    CommitBatch(h.chunk, token, record, tuple(by_chunk[h.chunk])),
-                )
-                for h, peer, token in remote
+            staged = await ask_all(
+                {
+                    (h.chunk, peer): self.call_commit_batch(
+                        self.members.address(peer),
+                        CommitBatch(h.chunk, token, record, tuple(by_chunk[h.chunk])),
+                    )
+                    for h, peer, token in remote
+                }
             )
+            staged.raise_first()
             await faults.reached("commit.staged")
             for h in held:  # our own replica is fenced too: a lapsed lease here stops us
                 if self.me in h.tokens:
@@ -252,38 +267,39 @@ class Replicator:
         await faults.reached("commit.applied")
         for h in held:  # the apply ends the remote leases: a renewal now would be refused
             await self.locks.stop_renewing(h)
-        results = await asyncio.gather(
-            *(
-                self.rpc.request(self.members.address(peer), CommitApply(h.chunk, token, record.id))
-                for h, peer, token in remote
-            ),
-            return_exceptions=True,
-        )
-        unconfirmed = []
-        for (h, peer, _), result in zip(remote, results, strict=True):
-            if isinstance(result, BaseException):
-                log.warning(
-                    "holder %s did not confirm commit %s on %s: %s",
-                    peer.short,
-                    record.id.short,
-                    h.chunk.short,
-                    result,
+        applied = await ask_all(
+            {
+                (h.chunk, peer): self.call_commit_apply(
+                    self.members.address(peer), CommitApply(h.chunk, token, record.id)
                 )
-                unconfirmed.append((h.chunk, peer))
-        return unconfirmed
+                for h, peer, token in remote
+            }
+        )
+        for (chunk, peer), error in applied.failed.items():
+            log.warning(
+                "holder %s did not confirm commit %s on %s: %s",
+                peer.short,
+                record.id.short,
+                chunk.short,
+                error,
+            )
+        return list(applied.failed)
 
     async def abort(self, held: Sequence[Held], commit_id: CommitId) -> None:
         """Tell every other holder to drop a staged batch (their locks are released
         separately by the caller's `LockService.release`)."""
-        await asyncio.gather(
-            *(
-                self.rpc.request(self.members.address(peer), CommitAbort(h.chunk, 0, commit_id))
+        dropped = await ask_all(
+            {
+                (h.chunk, peer): self.call_commit_abort(
+                    self.members.address(peer), CommitAbort(h.chunk, 0, commit_id)
+                )
                 for h in held
                 for peer in h.tokens
                 if peer != self.me
-            ),
-            return_exceptions=True,
+            }
         )
+        for (chunk, peer), error in dropped.failed.items():  # it drops the batch when it settles
+            log.debug("holder %s did not drop commit %s on %s: %s", peer, commit_id, chunk, error)
 
     # -- participation -------------------------------------------------------------------
     async def rpc_participate(self, req: Request) -> Ack:
@@ -302,16 +318,16 @@ class Replicator:
                 return Ack()
             await self._send_state(chunk, table, req.sender, [*holders, req.sender])
             others = [p for p in holders if p != self.me]
-            await _all(
-                self.rpc.request(
-                    self.members.address(p), HolderChange(chunk, held.tokens[p], newcomer, True)
-                )
-                for p in others
-            )
+            await self._tell_holders(others, chunk, held, newcomer, joined=True)
             self.store.set_holders(chunk, [*holders, req.sender])
         finally:
             await self.locks.release(held)
         return Ack()
+
+    async def call_participate(self, address: str, request: ParticipateRequest) -> None:
+        """Ask the holder at `address` to make this peer a holder (its
+        `rpc_participate`, which sends the chunk before it answers)."""
+        await self.rpc.request(address, request, timeout=60.0, expect=Ack)
 
     async def _send_state(
         self, chunk: ChunkId, table: str, to: PeerId, holders: Sequence[PeerId]
@@ -328,7 +344,11 @@ class Replicator:
         for index, piece in enumerate(pieces):
             records = tuple(commits[c] for c in sorted({r.commit_id for r in piece}))
             part = ChunkPart(chunk, info, members, tuple(piece), records, index, len(pieces))
-            await self.rpc.request(address, part, timeout=30.0, expect=Ack)
+            await self.call_chunk_part(address, part)
+
+    async def call_chunk_part(self, address: str, part: ChunkPart) -> None:
+        """Send one part of a chunk's state to the newcomer at `address`."""
+        await self.rpc.request(address, part, timeout=30.0, expect=Ack)
 
     async def rpc_chunk_part(self, req: Request) -> Ack:
         """Collect the parts of a chunk; install it atomically with the last one."""
@@ -387,6 +407,28 @@ class Replicator:
             holders.discard(body.member.id)
         self.store.set_holders(body.chunk, sorted(holders))
         return Ack()
+
+    async def call_holder_change(self, address: str, change: HolderChange) -> None:
+        """Tell the holder at `address` that a holder joined or left (its `rpc_holder_change`)."""
+        await self.rpc.request(address, change, expect=Ack)
+
+    async def _tell_holders(
+        self, others: Sequence[PeerId], chunk: ChunkId, held: Held, member: Member, *, joined: bool
+    ) -> None:
+        """Tell `others`, under the lock `held`, that `member` joined or left `chunk`.
+
+        Raises:
+            MapError: the first holder that refused or did not answer, once all did.
+        """
+        told = await ask_all(
+            {
+                p: self.call_holder_change(
+                    self.members.address(p), HolderChange(chunk, held.tokens[p], member, joined)
+                )
+                for p in others
+            }
+        )
+        told.raise_first()
 
     async def participate(
         self, chunk: ChunkId, progress: Progress | None = None, *, again: bool = False
@@ -461,7 +503,7 @@ class Replicator:
                 # A quick probe first: the index may still list a holder that died
                 # (its entry lives 30 s), and the request itself waits a long time.
                 await self.rpc.request(address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong)
-                await self.rpc.request(address, ParticipateRequest(chunk), timeout=60.0, expect=Ack)
+                await self.call_participate(address, ParticipateRequest(chunk))
                 return True
             except MapError as exc:
                 last = exc
@@ -500,12 +542,7 @@ class Replicator:
             if not others and not (force or keep):  # the others left while we waited
                 raise self._last_holder(chunk)
             me = self.members.me
-            await _all(
-                self.rpc.request(
-                    self.members.address(p), HolderChange(chunk, held.tokens[p], me, False)
-                )
-                for p in others
-            )
+            await self._tell_holders(others, chunk, held, me, joined=False)
             if not keep:
                 self.store.drop_chunk(chunk)
         finally:
@@ -572,6 +609,10 @@ class Replicator:
         members = tuple(self._member(p) for p in self.store.holders(chunk))
         return Holders(chunk, self.store.chunk_table(chunk), members)
 
+    async def call_holders_query(self, address: str, query: HoldersQuery) -> Holders:
+        """Ask the peer at `address` who holds a chunk (its `rpc_holders_query`)."""
+        return await self.rpc.request(address, query, expect=Holders)
+
     async def find_holders(
         self, *, chunk: ChunkId | None = None, item: ItemId | None = None
     ) -> Holders:
@@ -615,7 +656,7 @@ class Replicator:
         others = self.members.others()
         if not others:
             raise NoPeersError("this peer knows no other peer; `mapctl join ADDR` first")
-        asks = [self.rpc.request(s.member.address, query, expect=Holders) for s in others]
+        asks = [self.call_holders_query(s.member.address, query) for s in others]
         answer = await first_answer(asks, lambda holders: bool(holders.holders))
         if answer is not None:
             return answer
@@ -669,11 +710,3 @@ class Replicator:
         await self.announced.close()
         if self.places is not None:
             await self.places.close()
-
-
-async def _all(calls: object) -> None:
-    """Await every request; raise the first failure after all have finished."""
-    results = await asyncio.gather(*calls, return_exceptions=True)  # type: ignore[misc]
-    for result in results:
-        if isinstance(result, BaseException):
-            raise result

@@ -38,7 +38,14 @@ from mapapi.core.table import TableDescriptor
 from mapapi.lookup.dht.announce import Announcements, Entry
 from mapapi.lookup.extent import item_box
 from mapapi.lookup.spatial import BBox
-from mapapi.lookup.spatial_index import SpatialIndex, box3, box_of, encode_filter
+from mapapi.lookup.spatial_index import (
+    SpatialIndex,
+    box3,
+    box_of,
+    decode_filter,
+    encode_filter,
+)
+from mapapi.net.messages import Ack, TableInfo, TriggerPush
 from mapapi.swarm.triggers import CommitEvent, commit_event
 
 if TYPE_CHECKING:
@@ -46,9 +53,9 @@ if TYPE_CHECKING:
 
     from mapapi.lookup.dht.chord import ChordNode
     from mapapi.lookup.spatial import SpatialGrid
-    from mapapi.net.messages import Ack, Member, TriggerPush
     from mapapi.net.rpc import Request, Rpc
     from mapapi.store.base import ReplicaStore
+    from mapapi.swarm.membership import Members
 
 log = logging.getLogger(__name__)
 
@@ -168,14 +175,7 @@ def region_filter(argument: bytes) -> Callable[[bytes], bool]:
     Raises:
         ValueError: the argument is no box.
     """
-    spec = lookup_pb2.SpatialFilter()
-    try:
-        spec.ParseFromString(argument)
-    except DecodeError as exc:
-        raise ValueError(f"not a box: {exc}") from exc
-    if not spec.HasField("bbox"):
-        raise ValueError("the region filter needs a box")
-    box = box_of(spec.bbox)
+    box, _ = decode_filter(argument)
 
     def keep(member: bytes) -> bool:
         try:
@@ -205,16 +205,14 @@ class Subscriptions:
 
     Args:
         rpc: the peer's endpoint (pushes arrive and leave through it).
-        me: this peer as members see it (its current address).
+        members: the swarm's members (this peer's current address is `members.me`).
         store: the peer's store (tables, and the revisions before a commit).
         ttl: lifetime of a subscription's entries, refreshed every third of it.
     """
 
-    def __init__(self, rpc: Rpc, me: Callable[[], Member], store: ReplicaStore, ttl: float) -> None:
-        from mapapi.net.messages import TriggerPush
-
+    def __init__(self, rpc: Rpc, members: Members, store: ReplicaStore, ttl: float) -> None:
         self.rpc = rpc
-        self._me = me
+        self.members = members
         self.store = store
         self.ttl = ttl
         self.index: SpatialIndex | None = None
@@ -261,7 +259,7 @@ class Subscriptions:
         subscription = self.mine.get(sub_id)
         if subscription is None or self.index is None:
             return []
-        me = self._me()
+        me = self.members.me
         member = subscription.spec.to_pb(sub_id, me.id, me.address).SerializeToString(
             deterministic=True
         )
@@ -269,10 +267,12 @@ class Subscriptions:
 
     def rpc_trigger_push(self, req: Request) -> Ack:
         """A committer pushes revisions for one of our subscriptions."""
-        from mapapi.net.messages import Ack
-
         self._deliver(req.body)
         return Ack()
+
+    async def call_trigger_push(self, address: str, push: TriggerPush) -> None:
+        """Push revisions to the subscriber at `address` (its `rpc_trigger_push`)."""
+        await self.rpc.request(address, push, timeout=PUSH_TIMEOUT, expect=Ack)
 
     def _deliver(self, push: TriggerPush) -> None:
         subscription = self.mine.get(push.subscription)
@@ -348,17 +348,15 @@ class Subscriptions:
         record: CommitRecord,
         revisions: tuple[Revision, ...],
     ) -> None:
-        from mapapi.net.messages import Ack, TableInfo, TriggerPush
-
         names = sorted({r.table for r in revisions})
         tables = tuple(TableInfo(t, self.store.tables()[t]) for t in names)
         body = TriggerPush(sub_id, record, revisions, tables)
         self.pushes += 1
-        if PeerId.from_bytes(message.subscriber) == self._me().id:
+        if PeerId.from_bytes(message.subscriber) == self.members.me.id:
             self._deliver(body)
             return
         try:
-            await self.rpc.request(message.address, body, timeout=PUSH_TIMEOUT, expect=Ack)
+            await self.call_trigger_push(message.address, body)
         except MapError as exc:
             log.warning(
                 "subscriber at %s missed commit %s: %s", message.address, record.id.short, exc

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Generic, TypeVar
 
 from mapapi.core import limits
 from mapapi.core.errors import MapError, UsageError
+from mapapi.net.rpc import ask_all
 
 if TYPE_CHECKING:
     from mapapi.lookup.dht.chord import ChordNode
@@ -132,16 +133,12 @@ class Announcements(Generic[K]):
                 else:
                     await chord.remove(entry[0], entry[1])
 
-        results = await asyncio.gather(
-            *(one(e, False) for e in drop), *(one(e, True) for e in add), return_exceptions=True
-        )
-        failed = [r for r in results if isinstance(r, BaseException)]
-        for error in failed:
-            if not isinstance(error, MapError):
-                raise error
-        if failed:
-            log.warning("could not announce %s %s: %s", self._what, thing, failed[0])
-        return not failed
+        calls = {(e, False): one(e, False) for e in drop} | {(e, True): one(e, True) for e in add}
+        answers = await ask_all(calls)
+        if answers.failed:  # one line: the others likely failed the same way
+            error = next(iter(answers.failed.values()))
+            log.warning("could not announce %s %s: %s", self._what, thing, error)
+        return not answers.failed
 
     async def _refresh_forever(self) -> None:
         while True:

@@ -41,7 +41,7 @@ from mapapi.net.messages import (
     ChordStore,
     ChordValues,
 )
-from mapapi.net.rpc import Request, Rpc
+from mapapi.net.rpc import Request, Rpc, ask_all
 
 log = logging.getLogger(__name__)
 
@@ -442,12 +442,9 @@ class ChordNode:
 
     async def _replicate(self, body: object, targets: list[Node] | None = None) -> None:
         targets = [s for s in (self.successors if targets is None else targets) if s != self.me]
-        results = await asyncio.gather(
-            *(self._call(s, body, Ack) for s in targets), return_exceptions=True
-        )
-        for node, result in zip(targets, results, strict=True):
-            if isinstance(result, BaseException):
-                log.debug("replica %s missed an update: %s", node.address, result)
+        answers = await ask_all({s: self._call(s, body, Ack) for s in targets})
+        for node, error in answers.failed.items():
+            log.debug("replica %s missed an update: %s", node.address, error)
 
     async def _replicate_to_new_successors(self) -> None:
         """Copy the keys this node owns to successors that may lack them: new ones
