@@ -15,6 +15,7 @@ from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Conflict, Op
 from mapapi.core.view import View
 
@@ -162,3 +163,53 @@ def decode_view(blob: bytes) -> View:
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc
+
+
+def encode_proposal(p: Proposal) -> bytes:
+    """Serialize a transaction proposed to a chunk's Raft group (a log entry's data)."""
+    m = core_pb2.CommitProposal(
+        commit_id=p.commit_id.to_bytes(),
+        time=p.time,
+        author=p.author.to_bytes(),
+        author_name=p.author_name,
+        view=p.view,
+        message=p.message,
+        begin_time=p.begin_time,
+        isolation=p.isolation,
+    )
+    m.changes.extend(change_to_pb(c) for c in p.changes)
+    for item_id, time in sorted(p.since.items()):
+        m.since.add(item_id=item_id.to_bytes(), time=time)
+    m.read_set.extend(i.to_bytes() for i in sorted(p.read_set))
+    for table, chunk in sorted(p.scopes, key=lambda s: (s[0], s[1] or "")):
+        m.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
+    return bytes(m.SerializeToString())
+
+
+def decode_proposal(data: bytes) -> Proposal:
+    """A proposal from a log entry's data.
+
+    Raises:
+        CorruptRepoError: the entry does not parse (a damaged log).
+    """
+    m = core_pb2.CommitProposal()
+    try:
+        m.ParseFromString(data)
+        return Proposal(
+            CommitId.from_bytes(m.commit_id),
+            m.time,
+            PeerId.from_bytes(m.author),
+            m.author_name,
+            m.view,
+            m.message,
+            m.begin_time,
+            "serializable" if m.isolation == "serializable" else "snapshot",
+            tuple(change_from_pb(c) for c in m.changes),
+            {ItemId.from_bytes(s.item_id): s.time for s in m.since},
+            frozenset(ItemId.from_bytes(i) for i in m.read_set),
+            frozenset(
+                (s.table, ChunkId.from_bytes(s.chunk) if s.chunk else None) for s in m.scopes
+            ),
+        )
+    except (DecodeError, ValueError) as exc:
+        raise CorruptRepoError(f"a commit proposal in a chunk's log does not parse: {exc}") from exc

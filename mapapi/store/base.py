@@ -35,7 +35,8 @@ class LogRow:
 @dataclass(frozen=True, slots=True)
 class RaftRecord:
     """What a chunk's Raft group persisted here: hard state, applied index, the
-    last snapshot (index, term, config, data) and the log after it."""
+    last snapshot (index, term, config, data), the log after it, and the newest
+    commit time applied from the log (the chunk's clock)."""
 
     term: int
     vote: int
@@ -46,6 +47,7 @@ class RaftRecord:
     snap_config: bytes
     snap_data: bytes
     entries: tuple[LogRow, ...]
+    time: int = 0
 
 
 class Store(Protocol):
@@ -181,13 +183,16 @@ class ReplicaStore(Store, Protocol):
         """Persist a snapshot, then entries (replacing the log from the first one's
         index on), then the hard state (term, vote, commit), atomically."""
 
-    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
-        """Record the applied index; inside `exclusive()` with the entry's effect,
-        so both land or neither does.
+    def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
+        """Record the applied index and the newest commit time it brought; inside
+        `exclusive()` with the entry's effect, so both land or neither does.
 
         Raises:
             ValueError: the index goes backwards.
         """
+
+    def raft_time(self, chunk_id: ChunkId) -> int:
+        """The newest commit time applied from the chunk's log (0 if none)."""
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -265,7 +265,7 @@ class MemoryStore:
     ) -> None:
         """Keep a snapshot, then entries, then the hard state (as `raft_sql.save`)."""
         with self._lock:
-            kept = self._raft.get(chunk_id) or RaftRecord(0, 0, 0, 0, 0, 0, b"", b"", ())
+            kept = self._raft.get(chunk_id) or RaftRecord(0, 0, 0, 0, 0, 0, b"", b"", (), 0)
             if snapshot is not None:
                 index, term, config, data = snapshot
                 kept = replace(
@@ -286,8 +286,8 @@ class MemoryStore:
                 kept = replace(kept, term=hard[0], vote=hard[1], commit=hard[2])
             self._raft[chunk_id] = kept
 
-    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
-        """Keep the applied index.
+    def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
+        """Keep the applied index and the chunk's newest commit time.
 
         Raises:
             ValueError: it goes backwards, or the chunk has no group state.
@@ -300,7 +300,13 @@ class MemoryStore:
                 raise ValueError(
                     f"chunk {chunk_id}: applied index {index} is behind {kept.applied}"
                 )
-            self._raft[chunk_id] = replace(kept, applied=index)
+            self._raft[chunk_id] = replace(kept, applied=index, time=max(kept.time, time))
+
+    def raft_time(self, chunk_id: ChunkId) -> int:
+        """The newest commit time applied from the chunk's log."""
+        with self._lock:
+            kept = self._raft.get(chunk_id)
+            return 0 if kept is None else kept.time
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -1,7 +1,9 @@
 """The Raft state of each chunk's group in the SQLite store (DESIGN §13).
 
 Per chunk: the hard state (term, vote, commit index), the index applied to the
-store's revisions, the last snapshot's metadata, and the log after it. Kept in
+store's revisions and the newest commit time they brought (the chunk's clock,
+which every holder derives from the same log), the last snapshot's metadata,
+and the log after it. Kept in
 the same file as the revisions so that an entry's effect and the applied index
 move in one SQL transaction (`SqliteStore.exclusive`): after a crash nothing is
 applied twice and nothing applied is forgotten.
@@ -23,7 +25,7 @@ CREATE TABLE IF NOT EXISTS raft_state (
     vote INTEGER NOT NULL DEFAULT 0, commit_index INTEGER NOT NULL DEFAULT 0,
     applied INTEGER NOT NULL DEFAULT 0, snap_index INTEGER NOT NULL DEFAULT 0,
     snap_term INTEGER NOT NULL DEFAULT 0, snap_config BLOB NOT NULL DEFAULT x'',
-    snap_data BLOB NOT NULL DEFAULT x'');
+    snap_data BLOB NOT NULL DEFAULT x'', time INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS raft_log (
     chunk_id TEXT NOT NULL, idx INTEGER NOT NULL, term INTEGER NOT NULL,
     kind INTEGER NOT NULL, data BLOB NOT NULL,
@@ -35,7 +37,7 @@ def load(con: sqlite3.Connection, chunk: str) -> RaftRecord | None:
     """The stored state of `chunk`'s group, or None if this peer never persisted one."""
     row = con.execute(
         "SELECT term, vote, commit_index, applied, snap_index, snap_term, snap_config, "
-        "snap_data FROM raft_state WHERE chunk_id = ?",
+        "snap_data, time FROM raft_state WHERE chunk_id = ?",
         (chunk,),
     ).fetchone()
     if row is None:
@@ -46,7 +48,7 @@ def load(con: sqlite3.Connection, chunk: str) -> RaftRecord | None:
             "SELECT idx, term, kind, data FROM raft_log WHERE chunk_id = ? ORDER BY idx", (chunk,)
         )
     )
-    term, vote, commit, applied, snap_index, snap_term, snap_config, snap_data = row
+    term, vote, commit, applied, snap_index, snap_term, snap_config, snap_data, time = row
     return RaftRecord(
         term,
         vote,
@@ -57,6 +59,7 @@ def load(con: sqlite3.Connection, chunk: str) -> RaftRecord | None:
         bytes(snap_config),
         bytes(snap_data),
         entries,
+        time,
     )
 
 
@@ -100,8 +103,9 @@ def save(
         )
 
 
-def set_applied(con: sqlite3.Connection, chunk: str, index: int) -> None:
-    """Record that the store's revisions reflect `chunk`'s log up to `index`.
+def set_applied(con: sqlite3.Connection, chunk: str, index: int, time: int = 0) -> None:
+    """Record that the store's revisions reflect `chunk`'s log up to `index`, whose
+    newest commit time is `time` (the chunk's clock only moves forward).
 
     Raises:
         ValueError: `index` goes backwards (an entry would be applied twice).
@@ -111,7 +115,16 @@ def set_applied(con: sqlite3.Connection, chunk: str, index: int) -> None:
         raise ValueError(f"chunk {chunk} has no Raft state to apply to")
     if index < row[0]:
         raise ValueError(f"chunk {chunk}: applied index {index} is behind {row[0]}")
-    con.execute("UPDATE raft_state SET applied = ? WHERE chunk_id = ?", (index, chunk))
+    con.execute(
+        "UPDATE raft_state SET applied = ?, time = MAX(time, ?) WHERE chunk_id = ?",
+        (index, time, chunk),
+    )
+
+
+def chunk_time(con: sqlite3.Connection, chunk: str) -> int:
+    """The newest commit time applied from `chunk`'s log (0 if none)."""
+    row = con.execute("SELECT time FROM raft_state WHERE chunk_id = ?", (chunk,)).fetchone()
+    return 0 if row is None else int(row[0])
 
 
 def drop(con: sqlite3.Connection, chunk: str) -> None:

@@ -591,11 +591,15 @@ class SqliteStore:
         with self._write(con):
             raft_sql.save(con, chunk_id, hard=hard, entries=entries, snapshot=snapshot)
 
-    def raft_applied(self, chunk_id: ChunkId, index: int) -> None:
-        """Record the applied index (joins the caller's `exclusive()` transaction)."""
+    def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
+        """Record the applied index and time (joins the caller's `exclusive()`)."""
         con = self._con()
         with self._write(con):
-            raft_sql.set_applied(con, chunk_id, index)
+            raft_sql.set_applied(con, chunk_id, index, time)
+
+    def raft_time(self, chunk_id: ChunkId) -> int:
+        """The newest commit time applied from the chunk's log."""
+        return raft_sql.chunk_time(self._con(), chunk_id)
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

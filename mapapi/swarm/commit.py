@@ -14,10 +14,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from mapapi.core import codec
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import CommitUncertain, ConflictError, LockNotHeld, LockTimeout
+from mapapi.core.errors import (
+    CommitUncertain,
+    ConflictError,
+    LockNotHeld,
+    LockTimeout,
+    UsageError,
+)
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import (
     Change,
     Conflict,
@@ -27,12 +35,14 @@ from mapapi.core.transaction import (
     validate,
 )
 from mapapi.store.base import ReplicaStore, Store
+from mapapi.swarm import apply
 from mapapi.swarm.quorum import is_quorum
 
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
     from collections.abc import Awaitable, Callable, Sequence
 
     from mapapi.swarm.commit_check import CommitRule
+    from mapapi.swarm.groups import RaftGroups
     from mapapi.swarm.lock_client import Held, LockService
     from mapapi.swarm.replication import Replicator
 
@@ -92,7 +102,7 @@ def _validate(
 ) -> tuple[list[Change], dict[ItemId, Revision], list[Conflict]]:
     """Run the pure validation on this replica: (accepted changes, newest revisions, conflicts)."""
     changes = tx.changes
-    read_ids = _read_ids(store, tx)
+    read_ids = apply.read_ids(store, tx.isolation, tx.read_set, tx.scopes, tx.begin_time)
     latest = store.latest([c.item_id for c in changes] + sorted(read_ids))
     accepted, conflicts = validate(
         changes,
@@ -103,18 +113,6 @@ def _validate(
         base_of=lambda item_id: store.read(item_id, tx.begin_time),
     )
     return accepted, latest, conflicts
-
-
-def _read_ids(store: Store, tx: Transaction) -> set[ItemId]:
-    """The items a serializable transaction must find unchanged (reads and phantoms)."""
-    if tx.isolation != "serializable":
-        return set()
-    read_ids = tx.read_set
-    for table, chunk in tx.scopes:
-        read_ids |= {
-            r.item_id for r in store.changed_since(tx.begin_time, table=table, chunk=chunk)
-        }
-    return read_ids
 
 
 def commit_locally(
@@ -235,3 +233,32 @@ async def commit_distributed(
             await locks.release(mine)
     tx.committed(decision.revisions)
     return decision.record
+
+
+async def commit_through_log(
+    groups: RaftGroups,
+    chunk: ChunkId,
+    tx: Transaction,
+    message: str,
+    clock: LamportClock,
+) -> Decision:
+    """Commit `tx`'s writes to `chunk` through the chunk's Raft group (DESIGN §13),
+    which this peer leads: every holder decides the proposal in log order alike.
+
+    Raises:
+        ConflictError: someone changed an item of `tx` since its begin time.
+        UsageError: a commit rule refused the changes.
+        NotChunkLeader: another peer leads the chunk (retry there).
+        RequestTimeout: no majority of the chunk's voters took the entry.
+    """
+    proposal = Proposal.of(tx, chunk, message, clock.tick())
+    applied = await groups.propose(chunk, codec.encode_proposal(proposal))
+    outcome = applied.result
+    assert isinstance(outcome, apply.Outcome)  # the peer's groups apply with `apply.applier`
+    clock.advance_to(applied.time)
+    if outcome.conflicts:
+        raise ConflictError(list(outcome.conflicts), tx, seen_at=groups.store.raft_time(chunk))
+    if outcome.refusal:
+        raise UsageError(outcome.refusal)
+    tx.committed(list(outcome.revisions))
+    return Decision(outcome.record, list(outcome.revisions))

@@ -54,9 +54,20 @@ leader is replaced in 0.5-1 s, and heartbeats leave every 50 ms."""
 PROPOSE_TIMEOUT = 5.0
 """Seconds a proposal waits to be committed and applied."""
 
-ApplyFn = Callable[[ChunkId, Entry], None]
+
+@dataclass(frozen=True, slots=True)
+class Applied:
+    """What applying one entry did: the result its proposer receives, and the
+    newest commit time it brought to the chunk (0: none)."""
+
+    result: object = None
+    time: int = 0
+
+
+ApplyFn = Callable[[ChunkId, Entry], Applied]
 """Applies one committed NORMAL entry of a chunk's log to the store (called inside
-`store.exclusive()`, with the applied index recorded in the same transaction)."""
+`store.exclusive()`, with the applied index and time recorded in the same
+transaction)."""
 AddressFn = Callable[[PeerId], str]
 """Where a peer is reached now (the member list); raises `PeerUnavailable`."""
 
@@ -95,7 +106,7 @@ class _Group:
 
     chunk: ChunkId
     node: RaftNode
-    waiting: dict[int, tuple[int, asyncio.Future[int]]] = field(default_factory=dict)
+    waiting: dict[int, tuple[int, asyncio.Future[Applied]]] = field(default_factory=dict)
     role: Role = Role.FOLLOWER
     leader: int = NONE
 
@@ -223,9 +234,14 @@ class RaftGroups:
         return 0 if kept is None else kept.applied
 
     # -- proposing ---------------------------------------------------------------------
-    async def propose(self, chunk: ChunkId, data: bytes, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
+    async def propose(
+        self,
+        chunk: ChunkId,
+        data: bytes,
+        timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+    ) -> Applied:
         """Append `data` to the chunk's log here (this peer must lead) and wait
-        until it is committed and applied here; returns its index.
+        until it is committed and applied here; returns what applying it did.
 
         Raises:
             NotChunkLeader: another peer leads, or none does yet.
@@ -237,7 +253,7 @@ class RaftGroups:
             index, term = group.node.propose(data)
         except NotLeader as exc:
             raise NotChunkLeader(chunk, self._peer(exc.leader)) from None
-        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        done: asyncio.Future[Applied] = asyncio.get_running_loop().create_future()
         group.waiting[index] = (term, done)
         self._process(group)
         self._flush()
@@ -321,11 +337,13 @@ class RaftGroups:
     def _apply_committed(self, group: _Group, entries: tuple[Entry, ...]) -> None:
         if not entries:
             return
+        results: dict[int, Applied] = {}
         with self.store.exclusive():
             for entry in entries:
                 if entry.kind is EntryKind.NORMAL:
-                    self._apply(group.chunk, entry)
-            self.store.raft_applied(group.chunk, entries[-1].index)
+                    results[entry.index] = self._apply(group.chunk, entry)
+            time = max((r.time for r in results.values()), default=0)
+            self.store.raft_applied(group.chunk, entries[-1].index, time)
         for entry in entries:
             waiting = group.waiting.pop(entry.index, None)
             if waiting is None:
@@ -334,7 +352,7 @@ class RaftGroups:
             if done.done():
                 continue
             if term == entry.term:
-                done.set_result(entry.index)
+                done.set_result(results.get(entry.index, Applied()))
             else:
                 done.set_exception(
                     ProposalLost(f"chunk {group.chunk.short}: entry {entry.index} was replaced")

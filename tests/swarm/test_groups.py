@@ -13,13 +13,17 @@ from pathlib import Path
 
 import pytest
 
+from mapapi.core import codec
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import RequestTimeout
-from mapapi.core.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal
+from mapapi.core.transaction import Change, Op
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
-from mapapi.swarm.groups import NotChunkLeader, RaftGroups
+from mapapi.swarm.apply import Outcome, applier
+from mapapi.swarm.groups import Applied, NotChunkLeader, RaftGroups
 from mapapi.swarm.raft_types import Entry
 
 TIMEOUT = 10.0
@@ -46,9 +50,10 @@ class Node:
             on_change=self.changed.set,
         )
 
-    def _apply(self, chunk: ChunkId, entry: Entry) -> None:
+    def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
         self.applied.setdefault(chunk, []).append(entry.data)
         self.changed.set()
+        return Applied()
 
     async def start(self) -> None:
         self.world.addresses[self.id] = await self.rpc.start("tcp://127.0.0.1:0")
@@ -76,9 +81,9 @@ class World:
         self.addresses: dict[PeerId, str] = {}
         self.nodes: list[Node] = []
 
-    async def add(self, peer: PeerId | None = None) -> Node:
+    async def add(self, peer: PeerId | None = None, kind: type[Node] | None = None) -> Node:
         peer = peer or PeerId.new()
-        node = Node(self, peer, self.root / f"{peer.short}.sqlite")
+        node = (kind or Node)(self, peer, self.root / f"{peer.short}.sqlite")
         await node.start()
         self.nodes.append(node)
         return node
@@ -190,3 +195,62 @@ async def test_many_groups_share_one_frame_per_pair_of_peers(world: World) -> No
     # the heartbeats (or their answers) of several groups, not one frame per group.
     for node in nodes:
         assert node.groups.messages_sent >= 3 * node.groups.frames_sent
+
+
+# -- commits through the log: paper Algorithm 1 on one chunk's group -------------------
+COUNTER = ItemId.new()
+WRITERS, INCREMENTS, A0 = 4, 10, 100
+
+
+class Ledger(Node):
+    """A peer whose groups decide commit proposals (`swarm/apply.py`)."""
+
+    def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
+        applied = applier(self.store)(chunk, entry)
+        self.changed.set()
+        return applied
+
+
+async def increment(leader: Node, clock: LamportClock) -> int:
+    """One optimistic increment, retried on conflict; returns how many attempts it took."""
+    for attempt in range(1, 100):
+        begin = leader.store.raft_time(CHUNK)
+        value = int(leader.store.read(COUNTER, begin).data)  # type: ignore[union-attr]
+        change = Change(Op.UPDATE, "counters", COUNTER, CHUNK, str(value + 1).encode())
+        proposal = Proposal(
+            CommitId.new(), clock.tick(), leader.id, "w", "", "+1", begin, "snapshot", (change,)
+        )
+        applied = await leader.groups.propose(CHUNK, codec.encode_proposal(proposal))
+        outcome = applied.result
+        assert isinstance(outcome, Outcome)
+        if outcome.committed:
+            return attempt
+    raise AssertionError("an increment never committed")
+
+
+async def test_algorithm_1_through_the_log_ends_at_a0_plus_p_times_n(world: World) -> None:
+    nodes = [await world.add(kind=Ledger) for _ in range(3)]
+    for node in nodes:
+        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_chunk(CHUNK, "counters")
+        node.groups.found(CHUNK, [n.id for n in nodes])
+    leader = await leader_of(nodes, CHUNK)
+    clock = LamportClock()
+    first = Change(Op.INSERT, "counters", COUNTER, CHUNK, str(A0).encode())
+    start = Proposal(
+        CommitId.new(), clock.tick(), leader.id, "w", "", "a0", 0, "snapshot", (first,)
+    )
+    await leader.groups.propose(CHUNK, codec.encode_proposal(start))
+
+    async def writer() -> int:
+        return sum([await increment(leader, clock) for _ in range(INCREMENTS)])
+
+    attempts = await asyncio.gather(*(writer() for _ in range(WRITERS)))
+    assert sum(attempts) > WRITERS * INCREMENTS  # the writers did race
+    commits = 1 + WRITERS * INCREMENTS
+    for node in nodes:
+        await node.wait(lambda node=node: len(node.store.chunk_commits(CHUNK)) == commits)
+    values = {int(n.store.latest([COUNTER])[COUNTER].data) for n in nodes}
+    assert values == {A0 + WRITERS * INCREMENTS}
+    histories = {tuple(c.id for c in n.store.chunk_commits(CHUNK)) for n in nodes}
+    assert len(histories) == 1  # one history on every holder

@@ -118,3 +118,39 @@ class ViewState(_message.Message):
     read_set: _containers.RepeatedScalarFieldContainer[bytes]
     scopes: _containers.RepeatedCompositeFieldContainer[Scope]
     def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
+
+class CommitProposal(_message.Message):
+    __slots__ = ("commit_id", "time", "author", "author_name", "view", "message", "begin_time", "isolation", "changes", "since", "read_set", "scopes")
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    AUTHOR_FIELD_NUMBER: _ClassVar[int]
+    AUTHOR_NAME_FIELD_NUMBER: _ClassVar[int]
+    VIEW_FIELD_NUMBER: _ClassVar[int]
+    MESSAGE_FIELD_NUMBER: _ClassVar[int]
+    BEGIN_TIME_FIELD_NUMBER: _ClassVar[int]
+    ISOLATION_FIELD_NUMBER: _ClassVar[int]
+    CHANGES_FIELD_NUMBER: _ClassVar[int]
+    SINCE_FIELD_NUMBER: _ClassVar[int]
+    READ_SET_FIELD_NUMBER: _ClassVar[int]
+    SCOPES_FIELD_NUMBER: _ClassVar[int]
+    commit_id: bytes
+    time: int
+    author: bytes
+    author_name: str
+    view: str
+    message: str
+    begin_time: int
+    isolation: str
+    changes: _containers.RepeatedCompositeFieldContainer[Change]
+    since: _containers.RepeatedCompositeFieldContainer[ItemSince]
+    read_set: _containers.RepeatedScalarFieldContainer[bytes]
+    scopes: _containers.RepeatedCompositeFieldContainer[Scope]
+    def __init__(self, commit_id: _Optional[bytes] = ..., time: _Optional[int] = ..., author: _Optional[bytes] = ..., author_name: _Optional[str] = ..., view: _Optional[str] = ..., message: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., since: _Optional[_Iterable[_Union[ItemSince, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
+
+class ItemSince(_message.Message):
+    __slots__ = ("item_id", "time")
+    ITEM_ID_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    item_id: bytes
+    time: int
+    def __init__(self, item_id: _Optional[bytes] = ..., time: _Optional[int] = ...) -> None: ...
