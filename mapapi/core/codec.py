@@ -3,8 +3,9 @@
 It converts revisions, commit records, changes, conflicts and persisted views,
 for storage and for the wire codec (`mapapi.net.codec`, which sees only the
 envelope of `wire.proto`). It is not the only module that sees generated
-protobuf: the spatial index stores its entries as `lookup.proto` messages
-(`mapapi.lookup.entries`) and the application layer reads `maps.proto` types.
+protobuf: the Chord index's values are `lookup.proto` messages that
+`mapapi.lookup.spatial_index` (entries, filters) and `mapapi.swarm.subscriptions`
+(subscriptions) read and write, and the application layer reads `maps.proto` types.
 """
 
 from __future__ import annotations

@@ -3,15 +3,18 @@ items lie by type (mapapi.lookup.extent): pure functions, no ring."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 from google.protobuf import struct_pb2
 
-from mapapi._pb.mapapi.v1 import maps_pb2
+from mapapi._pb.mapapi.v1 import lookup_pb2, maps_pb2
 from mapapi.core.errors import InvalidBBox
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.extent import extent_of, item_box
 from mapapi.lookup.spatial import BBox
-from mapapi.lookup.spatial_index import SpatialRef, bbox_filter, encode_filter
+from mapapi.lookup.spatial_index import SpatialRef, bbox_filter, decode_filter, encode_filter
+from mapapi.swarm.subscriptions import region_filter
 
 CHUNK = ChunkId("0123456789abcdef0123456789abcdef")
 HOLDER = (PeerId("fedcba9876543210fedcba9876543210"), "tcp://10.0.0.7:7000")
@@ -58,9 +61,20 @@ class TestBboxFilter:
         assert not keep(b"\x00" * 16 + b"tcp://127.0.0.1:1")  # a holder entry
 
     @pytest.mark.parametrize("argument", [b"\xff\xff", b""])
-    def test_a_bad_argument_is_refused(self, argument: bytes) -> None:
+    @pytest.mark.parametrize("member_filter", [bbox_filter, region_filter])
+    def test_a_bad_argument_is_refused(
+        self, argument: bytes, member_filter: Callable[[bytes], object]
+    ) -> None:
         with pytest.raises(ValueError, match="spatial filter"):
-            bbox_filter(argument)
+            member_filter(argument)
+
+    def test_one_parser_reads_what_encode_filter_wrote(self) -> None:
+        box = BBox(0, 1, 2, 3, 4, 5)
+        assert decode_filter(encode_filter(box, "rooms")) == (box, "rooms")
+        assert decode_filter(encode_filter(box)) == (box, None)
+        inverted = maps_pb2.Box3(xmin=1, xmax=0)
+        with pytest.raises(InvalidBBox):
+            decode_filter(lookup_pb2.SpatialFilter(bbox=inverted).SerializeToString())
 
 
 def struct(**fields: object) -> struct_pb2.Struct:
