@@ -23,6 +23,7 @@ import logging
 import random
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import partial
 
 from mapapi.core.errors import MapError, PeerUnavailable, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
@@ -40,11 +41,13 @@ from mapapi.swarm.raft_types import (
     MessageKind,
     NotLeader,
     PersistentState,
+    ProposalRefused,
     RaftOptions,
     Ready,
     Role,
     Snapshot,
 )
+from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +112,7 @@ class _Group:
     waiting: dict[int, tuple[int, asyncio.Future[Applied]]] = field(default_factory=dict)
     role: Role = Role.FOLLOWER
     leader: int = NONE
+    progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
 
 
 class RaftGroups:
@@ -249,10 +253,56 @@ class RaftGroups:
             RequestTimeout: not committed within `timeout` (no quorum reachable).
         """
         group = self._group(chunk)
+        return await self._await_entry(group, lambda: group.node.propose(data), timeout)
+
+    async def change_members(
+        self,
+        chunk: ChunkId,
+        holders: Iterable[PeerId],
+        factor: int = DEFAULT_REPLICATION,
+        timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+    ) -> Config:
+        """As the chunk's leader, make `holders` the group's members, one
+        single-server change at a time, with the voters `voters.next_change`
+        picks (an odd number, at most `factor`); returns the configuration then.
+        A new holder must have called `join` to take in the log.
+
+        Raises:
+            NotChunkLeader: this peer does not lead the chunk (or stopped leading).
+            RequestTimeout: the changes did not all apply within `timeout`.
+        """
+        group = self._group(chunk)
+        wanted = {node_id(p) for p in holders}
+        me = node_id(self.me)
         try:
-            index, term = group.node.propose(data)
+            async with asyncio.timeout(timeout):
+                while (change := next_change(group.node.config, wanted, factor, me)) is not None:
+                    try:
+                        await self._await_entry(
+                            group, partial(group.node.propose_conf_change, change), timeout
+                        )
+                    except ProposalRefused:  # its own no-op or a change still uncommitted
+                        group.progress.clear()
+                        await group.progress.wait()
+        except TimeoutError:
+            raise RequestTimeout(
+                f"chunk {chunk.short}: its members did not change within {timeout:g} s "
+                "(too few voters reachable)"
+            ) from None
+        return group.node.config
+
+    async def _await_entry(
+        self,
+        group: _Group,
+        start: Callable[[], tuple[int, int]],
+        timeout: float,  # noqa: ASYNC109
+    ) -> Applied:
+        """Start a proposal (`start` returns its index and term) and wait until
+        its entry applies here."""
+        try:
+            index, term = start()
         except NotLeader as exc:
-            raise NotChunkLeader(chunk, self._peer(exc.leader)) from None
+            raise NotChunkLeader(group.chunk, self._peer(exc.leader)) from None
         done: asyncio.Future[Applied] = asyncio.get_running_loop().create_future()
         group.waiting[index] = (term, done)
         self._process(group)
@@ -263,7 +313,7 @@ class RaftGroups:
         except TimeoutError:
             group.waiting.pop(index, None)
             raise RequestTimeout(
-                f"chunk {chunk.short}: entry {index} not committed within {timeout:g} s "
+                f"chunk {group.chunk.short}: entry {index} not committed within {timeout:g} s "
                 "(too few voters reachable)"
             ) from None
 
@@ -337,6 +387,7 @@ class RaftGroups:
     def _apply_committed(self, group: _Group, entries: tuple[Entry, ...]) -> None:
         if not entries:
             return
+        group.progress.set()
         results: dict[int, Applied] = {}
         with self.store.exclusive():
             for entry in entries:

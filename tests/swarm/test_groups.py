@@ -254,3 +254,34 @@ async def test_algorithm_1_through_the_log_ends_at_a0_plus_p_times_n(world: Worl
     assert values == {A0 + WRITERS * INCREMENTS}
     histories = {tuple(c.id for c in n.store.chunk_commits(CHUNK)) for n in nodes}
     assert len(histories) == 1  # one history on every holder
+
+
+# -- holders come and go through the log ------------------------------------------------
+async def test_a_second_holder_is_a_learner_that_catches_up(world: World) -> None:
+    first = await world.add()
+    first.groups.found(CHUNK, [first.id])
+    await propose_all(first, CHUNK, [b"a", b"b"])
+    second = await world.add()
+    second.groups.join(CHUNK)
+    config = await first.groups.change_members(CHUNK, [first.id, second.id])
+    assert (len(config.voters), len(config.learners)) == (1, 1)  # never two voters
+    await propose_all(first, CHUNK, [b"c"])  # the learner never holds a commit up
+    await second.wait(lambda: second.applied.get(CHUNK) == [b"a", b"b", b"c"])
+
+
+async def test_a_dead_voter_is_removed_and_a_learner_promoted(world: World) -> None:
+    nodes = await founded(world, [CHUNK])
+    leader = await leader_of(nodes, CHUNK)
+    fourth = await world.add()
+    fourth.groups.join(CHUNK)
+    config = await leader.groups.change_members(CHUNK, [*(n.id for n in nodes), fourth.id])
+    assert (len(config.voters), len(config.learners)) == (3, 1)
+    dead = next(n for n in nodes if n is not leader)
+    await dead.stop()
+    world.nodes.remove(dead)
+    living = [n.id for n in world.nodes]
+    config = await leader.groups.change_members(CHUNK, living)
+    assert len(config.voters) == 3
+    assert not config.learners
+    await propose_all(leader, CHUNK, [b"after"])
+    await fourth.wait(lambda: fourth.applied.get(CHUNK, [])[-1:] == [b"after"])
