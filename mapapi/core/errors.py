@@ -346,3 +346,69 @@ class InvalidBBox(QueryError, ValueError):
 
     code = 61
     exit_code = 2
+
+
+class NoSpaceLeft(RepoError):
+    """The disk holding the repository is full: a write was refused whole (SQLite
+    rolls its transaction back), nothing stored was lost; free space and retry."""
+
+    code = 70
+
+
+class CorruptPayload(CorruptRepoError, UsageError):
+    """A payload's bytes do not parse as its table's type.
+
+    Read from the store, the store is damaged: `at` names the file and the
+    item, and the CLI exits 1. It is also a UsageError because a revision
+    received from another peer that does not parse is that peer's mistake
+    (`mapapi.swarm.commit_check` refuses the batch with it).
+
+    Args:
+        table: the item's table.
+        type_name: the table's message type.
+        data: the bytes that do not parse (kept so that a caller who knows the
+            store can find the item: `at`).
+        why: the parser's complaint.
+        where: which item of which store (set by `at`).
+    """
+
+    code = 71
+    exit_code = 1
+
+    def __init__(
+        self, table: str, type_name: str, data: bytes = b"", why: str = "", where: str = ""
+    ) -> None:
+        self.table, self.type_name, self.data, self.why = table, type_name, data, why
+        self.where = where
+        what = f"payload of {len(data)} bytes does not parse as {type_name}" + (
+            f" ({why})" if why else ""
+        )
+        if where:
+            what = (
+                f"{where} is damaged: its {what}; restore the store from a backup or "
+                "clone the repository again"
+            )
+        else:
+            what = f"an item of table {table!r}: its {what}"
+        super().__init__(what)
+
+    def at(self, path: object, items: list[str]) -> CorruptPayload:
+        """The same error naming the store file and the items holding the bytes."""
+        which = f"item {', '.join(items)}" if items else "an item"
+        return CorruptPayload(
+            self.table,
+            self.type_name,
+            self.data,
+            self.why,
+            where=f"{which} of table {self.table!r} in {path}",
+        )
+
+
+class ConfigLost(RepoError):
+    """`init` over a folder whose store holds a map but whose config is gone: a
+    new peer id would lock the peer out of its own chunks (`init --recover`).
+    Like `AlreadyInitialisedError`, but a usage error: the folder is no
+    repository yet, and `init` must be asked differently."""
+
+    code = 72
+    exit_code = 2

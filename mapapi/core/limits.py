@@ -220,3 +220,22 @@ def payload(n: int) -> None:
             f"an item payload of {n} bytes exceeds the limit of {MAX_PAYLOAD_BYTES} "
             "(MAX_PAYLOAD_BYTES); split the item, or store the data elsewhere and a reference"
         )
+
+
+def table_name(name: str) -> str:
+    """`name` if a table of that name can travel: every message that carries a
+    chunk (its revisions, its summary, a commit) names the table in a field of
+    at most `MAX_TEXT["table"]` characters, so a longer name would be accepted
+    locally and refused by every peer asked to replicate it.
+
+    Raises:
+        LimitExceeded: naming the limit.
+    """
+    limit = MAX_TEXT["table"]
+    if len(name) > limit:
+        raise LimitExceeded(
+            f"a table name of {len(name)} characters exceeds the limit of {limit} "
+            "(MAX_TEXT['table']): other peers could never replicate its chunks; "
+            "choose a shorter name"
+        )
+    return name

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,7 +14,7 @@ from google.protobuf.descriptor_pool import Default as _default_pool
 from google.protobuf.message import DecodeError, Message
 
 from mapapi.core import limits
-from mapapi.core.errors import UsageError
+from mapapi.core.errors import CorruptPayload, UsageError
 
 # Imported for their side effect: they register the built-in types in the pool.
 _BUILTIN_MODULES = (struct_pb2, wrappers_pb2)
@@ -25,7 +27,22 @@ BUILTIN_TYPES = (
     "mapapi.v1.Account",
 )
 
+MAP_TYPES = (
+    "mapapi.v1.Mission",
+    "mapapi.v1.Vertex",
+    "mapapi.v1.Edge",
+    "mapapi.v1.Landmark",
+    "mapapi.v1.PointCloudBlock",
+)
+"""The types of the map tables `mapctl import` writes (`mapapi.maps.schema`)."""
+
+TABLE_TYPES = BUILTIN_TYPES + MAP_TYPES
+"""What `mapctl table create --type` accepts: types whose values every command can
+show and every peer of any swarm knows. Other types of the protobuf pool (the
+wire's own messages, `google.protobuf.Value`, ...) are no table types."""
+
 _INT64_TYPES = (FieldDescriptor.CPPTYPE_INT64, FieldDescriptor.CPPTYPE_UINT64)
+_FLOAT_TYPES = (FieldDescriptor.CPPTYPE_DOUBLE, FieldDescriptor.CPPTYPE_FLOAT)
 
 
 def message_class(type_name: str) -> type[Message]:
@@ -47,6 +64,18 @@ def message_class(type_name: str) -> type[Message]:
             f"unknown message type {type_name!r}; built-in types: {', '.join(BUILTIN_TYPES)}"
         ) from None
     return message_factory.GetMessageClass(descriptor)
+
+
+def check_new_table(name: str, type_name: str) -> None:
+    """Refuse a table `table create` should not make: a name no other peer
+    could replicate (`limits.table_name`), or a type that is no table type.
+
+    Raises:
+        UsageError: naming the limit, or listing the table types.
+    """
+    limits.table_name(name)
+    if type_name not in TABLE_TYPES:
+        raise UsageError(f"{type_name!r} is not a table type; use one of: {', '.join(TABLE_TYPES)}")
 
 
 @dataclass(frozen=True)
@@ -86,19 +115,34 @@ class TableDescriptor:
         return data
 
     def decode(self, data: bytes) -> Message:
-        """Parse a stored payload."""
+        """Parse a stored payload.
+
+        Raises:
+            CorruptPayload: the bytes are no message of the table's type (a
+                damaged store); it carries them, so a caller that knows the
+                store can name the file and the item (`CorruptPayload.at`).
+        """
         message = self.message_type()
         try:
             message.ParseFromString(data)
         except DecodeError as exc:
-            raise UsageError(f"stored item of table {self.name!r} does not parse: {exc}") from exc
+            raise CorruptPayload(self.name, self.type_name, data, str(exc)) from exc
         return message
 
     def from_json(self, text: str) -> Message:
         """Parse JSON text (protobuf JSON mapping) into a payload.
 
+        JSON numbers must be finite: NaN and +-Infinity (which Python's JSON
+        reader accepts) only fit a `double` or `float` field of a typed
+        message, which stores them as IEEE values and shows them as protobuf's
+        JSON does ("NaN", "Infinity", "-Infinity"). A schemaless number (in a
+        Struct, Value or ListValue) has no such form: stored, it could never be
+        written out as JSON again.
+
         Raises:
-            UsageError: the text is not JSON, or does not fit the type.
+            UsageError: the text is not JSON, does not fit the type, or holds a
+                non-finite number where the type has no place for one (the
+                message names the field).
         """
         message = self.message_type()
         try:
@@ -107,6 +151,12 @@ class TableDescriptor:
             raise UsageError(
                 f"data does not fit table {self.name!r} ({self.type_name}): {exc}"
             ) from exc
+        for path, value in _schemaless_non_finite(message, ""):
+            raise UsageError(
+                f"data does not fit table {self.name!r} ({self.type_name}): {path or 'the value'} "
+                f"is {_non_finite_text(value.number_value)}; JSON numbers must be "  # type: ignore[attr-defined]
+                "finite (only a double or float field of a typed table holds NaN or Infinity)"
+            )
         return message
 
     def to_dict(self, message: Message) -> Any:
@@ -150,10 +200,64 @@ def plain_json(message: Message) -> Any:
     maps come out with sorted keys, so output is stable across runs. Other
     well-known types (Timestamp, Duration, ...) keep their canonical JSON form.
     """
+    if next(_schemaless_non_finite(message, ""), None) is not None:
+        # Stored before `from_json` refused them (or sent by another peer): the
+        # same strings protobuf's JSON writes for a non-finite double.
+        message = _finite_copy(message)
     value = json_format.MessageToDict(
         message, preserving_proto_field_name=True, always_print_fields_with_no_presence=True
     )
     return _plain(message.DESCRIPTOR, value)
+
+
+def _non_finite_text(number: float) -> str:
+    """How protobuf's JSON mapping writes a non-finite double."""
+    return "NaN" if math.isnan(number) else ("Infinity" if number > 0 else "-Infinity")
+
+
+def _schemaless_non_finite(message: Message, path: str) -> Iterator[tuple[str, Message]]:
+    """Each `google.protobuf.Value` in `message` (a Struct's, a ListValue's, or
+    any field's) holding a non-finite number, with its path (`pose.y[1]`).
+    Typed double and float fields are not schemaless: they do not count."""
+    name = message.DESCRIPTOR.full_name
+    if name == "google.protobuf.Value":
+        kind = message.WhichOneof("kind")
+        if kind == "number_value" and not math.isfinite(message.number_value):  # type: ignore[attr-defined]
+            yield path, message
+        elif kind in ("struct_value", "list_value"):
+            yield from _schemaless_non_finite(getattr(message, kind), path)
+        return
+    if name == "google.protobuf.Struct":
+        fields = message.fields  # type: ignore[attr-defined]
+        for key in sorted(fields):
+            yield from _schemaless_non_finite(fields[key], f"{path}.{key}" if path else key)
+        return
+    if name == "google.protobuf.ListValue":
+        for i, value in enumerate(message.values):  # type: ignore[attr-defined]
+            yield from _schemaless_non_finite(value, f"{path}[{i}]")
+        return
+    for field, value in message.ListFields():
+        if field.message_type is None:
+            continue
+        where = f"{path}.{field.name}" if path else field.name
+        if field.message_type.GetOptions().map_entry:
+            children = [(f"{where}.{k}", v) for k, v in value.items()]
+        elif field.is_repeated:
+            children = [(f"{where}[{i}]", v) for i, v in enumerate(value)]
+        else:
+            children = [(where, value)]
+        for child_path, child in children:
+            if isinstance(child, Message):
+                yield from _schemaless_non_finite(child, child_path)
+
+
+def _finite_copy(message: Message) -> Message:
+    """A copy of `message` whose schemaless non-finite numbers are their JSON strings."""
+    copy = type(message)()
+    copy.CopyFrom(message)
+    for _, value in list(_schemaless_non_finite(copy, "")):
+        value.string_value = _non_finite_text(value.number_value)  # type: ignore[attr-defined]
+    return copy
 
 
 _INT_WRAPPERS = ("google.protobuf.Int64Value", "google.protobuf.UInt64Value")

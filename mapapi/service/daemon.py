@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, BinaryIO
 from urllib.parse import urlsplit
 
 from mapapi.core import faults
@@ -44,6 +44,12 @@ STOP_TIMEOUT = 20.0
 _POLL = 0.02  # seconds between looks at another process's state
 _WILDCARD_HOSTS = frozenset({"0.0.0.0", "*"})
 _DETACHED: list[subprocess.Popen[bytes]] = []  # daemons this process started
+
+LOG_ENV = "MAPAPI_PEER_LOG"
+"""Set by `spawn_detached` for its child: the log the child writes itself once it
+serves. Until then its output goes through a pipe to the parent, which copies it
+to the log and, when the child exits first, shows it: on a full disk the log
+cannot be written and would leave "(see peer.log)" pointing at nothing."""
 
 
 def refuse_if_running(repo: Repository) -> None:
@@ -227,7 +233,27 @@ async def _go_live(
     record = PeerRecord(os.getpid(), peer.id, peer.name, address, address, endpoint, time.time())
     repo.write_peer_record(record)
     log.info("peer %s serves %s (control %s)", peer.id.short, address, endpoint)
+    _adopt_log(os.environ.get(LOG_ENV))
     return record
+
+
+def _adopt_log(path: str | None) -> None:
+    """Point this process's stdout and stderr at its log `path` (a detached
+    daemon, once it serves: see `LOG_ENV`); the parent reading the pipe they
+    were sees its end and returns. If the log cannot be opened, output goes to
+    /dev/null (the daemon runs on; the parent shows why)."""
+    if not path:
+        return
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    except OSError as exc:
+        log.warning("cannot write %s (%s): the daemon's output is dropped", path, exc)
+        fd = os.open(os.devnull, os.O_WRONLY)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
 
 
 REMEMBER_PERIOD = 2.0
@@ -298,11 +324,9 @@ def daemon_command(
     return argv
 
 
-def _log_tail(repo: Repository) -> str:
-    try:
-        lines = repo.log_path.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return ""
+def _log_tail(text: str) -> str:
+    """The line of a child's output that says why it stopped."""
+    lines = text.splitlines()
     errors = [line for line in lines if line.startswith("error:")]
     return (errors or [line for line in lines if line.strip()] or [""])[-1]
 
@@ -322,19 +346,25 @@ def spawn_detached(
         RequestTimeout: it did not serve within `timeout` seconds (it is killed).
     """
     refuse_if_running(repo)
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    with open(repo.log_path, "ab") as out:
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", LOG_ENV: str(repo.log_path)}
+    deadline = time.monotonic() + timeout
+    reader, writer = os.pipe()
+    try:
         proc = subprocess.Popen(
             list(argv),
             stdin=subprocess.DEVNULL,
-            stdout=out,
+            stdout=writer,
             stderr=subprocess.STDOUT,
             cwd=repo.root,
             env=env,
             start_new_session=True,  # no terminal's SIGINT/SIGHUP reaches it
         )
+    finally:
+        os.close(writer)
     try:
-        record = _await_record(repo, proc, timeout)
+        with os.fdopen(reader, "rb") as pipe:
+            output, where = _relay(pipe, repo, deadline)
+        record = _await_record(proc, repo, deadline, output, where)
         _ping(record, repo)
     except BaseException:
         _end(proc)
@@ -343,22 +373,47 @@ def spawn_detached(
     return record
 
 
-def _await_record(repo: Repository, proc: subprocess.Popen[bytes], timeout: float) -> PeerRecord:
-    deadline = time.monotonic() + timeout
+def _relay(pipe: BinaryIO, repo: Repository, deadline: float) -> tuple[str, str]:
+    """Copy the child's output to its log until the child lets go of the pipe (it
+    serves and writes the log itself, or it exits) or `deadline`; return the
+    output and where to read it: the log, or why the log could not be written."""
+    import select
+
+    seen = bytearray()
+    failed: OSError | None = None
+    while (left := deadline - time.monotonic()) > 0:
+        if not select.select([pipe], [], [], left)[0]:
+            break
+        chunk = os.read(pipe.fileno(), 65536)
+        if not chunk:
+            break  # the child serves (`_adopt_log`) or is gone
+        seen += chunk
+        del seen[: max(0, len(seen) - 65536)]  # the tail says why it stopped
+        try:
+            with open(repo.log_path, "ab") as out:
+                out.write(chunk)
+        except OSError as exc:
+            failed = exc
+    where = f"see {repo.log_path}"
+    if failed is not None:
+        where = f"{repo.log_path} could not be written: {failed.strerror or failed}"
+    return seen.decode("utf-8", errors="replace"), where
+
+
+def _await_record(
+    proc: subprocess.Popen[bytes], repo: Repository, deadline: float, output: str, where: str
+) -> PeerRecord:
     while True:
         code = proc.poll()
         if code is not None:
             raise PeerNotRunning(
-                f"the peer exited (status {code}) before it served: {_log_tail(repo)} "
-                f"(see {repo.log_path})"
+                f"the peer exited (status {code}) before it served: {_log_tail(output)} ({where})"
             )
         record = repo.read_peer_record()
         if record is not None and record.pid == proc.pid:
             return record
         if time.monotonic() > deadline:
-            raise RequestTimeout(
-                f"the peer did not serve within {timeout:g} s; see {repo.log_path}"
-            )
+            raise RequestTimeout(f"the peer did not serve in time ({where})")
         time.sleep(_POLL)  # sync-ok: polling another process's state
 
 

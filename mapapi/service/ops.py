@@ -16,15 +16,17 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from mapapi.core.errors import ItemNotFound, PeerNotRunning, UsageError
+from mapapi.core.errors import CorruptPayload, ItemNotFound, PeerNotRunning, UsageError
 from mapapi.core.history import CommitRecord, change_kind, number_commits
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.limits import PEER_ADDRESS
+from mapapi.core.table import check_new_table
 from mapapi.core.transaction import Op
 from mapapi.maps.operations import MapOperations
 from mapapi.service.transfer_ops import TransferOperations
 from mapapi.service.watch_ops import WatchOperations
 from mapapi.service.workspace import Workspace
+from mapapi.store.file_check import locate_payload
 
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
@@ -59,7 +61,13 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
             inspect.signature(method).bind(**args)
         except TypeError as exc:
             raise UsageError(f"bad arguments for {op!r}: {exc}") from exc
-        return await method(**args)
+        try:
+            return await method(**args)
+        except CorruptPayload as exc:  # name the file and the item (issue 18)
+            located = locate_payload(exc, self.peer.store)
+            if located is None:
+                raise
+            raise located from exc
 
     # -- shapes ------------------------------------------------------------------
     def _fields(self, table: str, data: bytes | None) -> Json:
@@ -137,7 +145,8 @@ class Operations(WatchOperations, MapOperations, TransferOperations):
 
     # -- tables and chunks -------------------------------------------------------------
     async def table_create(self, name: str, type_name: str) -> Json:
-        """Create a table."""
+        """Create a table (refusing a name that cannot travel, or an unknown type)."""
+        check_new_table(name, type_name)
         descriptor = await self.peer.create_table(name, type_name)
         return {"name": descriptor.name, "type": descriptor.type_name}
 

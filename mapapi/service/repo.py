@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from mapapi.core.errors import (
     AlreadyInitialisedError,
+    ConfigLost,
     CorruptRepoError,
     MapError,
     NotARepoError,
@@ -21,6 +22,7 @@ from mapapi.core.errors import (
 )
 from mapapi.core.ids import PeerId
 from mapapi.lookup.spatial import SpatialGrid
+from mapapi.service.recover import RecoveredIdentity, recover_identity
 from mapapi.store.sqlite import SqliteStore
 
 if TYPE_CHECKING:
@@ -191,6 +193,7 @@ class Repository:
             raise AlreadyInitialisedError(
                 f"{root} is already a map repository; use it as is, or init another folder"
             )
+        _refuse_a_kept_store(meta / STORE)
         meta.mkdir(parents=True, exist_ok=True)
         config = RepoConfig(
             name=name or root.name,
@@ -201,10 +204,52 @@ class Repository:
         if secure:
             _make_keys(meta)
         SqliteStore(meta / STORE, create=True).close()
-        tmp = meta / (CONFIG + ".tmp")
-        tmp.write_text(config.to_toml(), encoding="utf-8")
-        tmp.replace(meta / CONFIG)  # the config appears last: its presence means "initialised"
+        _write_config(meta, config)  # last: its presence means "initialised"
         return cls(root, config)
+
+    @classmethod
+    def recover(
+        cls,
+        path: str | Path,
+        name: str | None = None,
+        spatial: SpatialGrid | None = None,
+        *,
+        peer_id: str | None = None,
+    ) -> tuple[Repository, RecoveredIdentity]:
+        """Rebuild the lost config of the repository in `path` from its store:
+        the peer id and name (`mapapi.service.recover`), secure if its keypair
+        is there; `spatial` (the default otherwise) is not in the store.
+
+        Raises:
+            AlreadyInitialisedError: the config is there: nothing to recover.
+            NotARepoError: there is no store to recover from.
+            UsageError: the store cannot tell the peer id (give `peer_id`).
+        """
+        from mapapi.net.security import KEY_DIR
+
+        root = Path(path).resolve()
+        meta = root / REPO_DIR
+        if (meta / CONFIG).exists():
+            raise AlreadyInitialisedError(
+                f"{meta / CONFIG} is there: nothing to recover; use the repository as is"
+            )
+        if not (meta / STORE).exists():
+            raise NotARepoError(
+                f"no store to recover from in {meta}: `mapctl init` makes a new repository"
+            )
+        store = SqliteStore(meta / STORE)
+        try:
+            identity = recover_identity(store, peer_id)
+        finally:
+            store.close()
+        config = RepoConfig(
+            name=name or identity.name or root.name,
+            peer_id=identity.peer_id,
+            spatial=spatial or SpatialGrid(),
+            secure=(meta / KEY_DIR).is_dir(),
+        )
+        _write_config(meta, config)
+        return cls(root, config), identity
 
     @classmethod
     def find(cls, start: str | Path = ".") -> Repository:
@@ -248,9 +293,7 @@ class Repository:
             )
         _make_keys(self.meta_dir)
         config = replace(self.config, secure=True)
-        tmp = self.meta_dir / (CONFIG + ".tmp")
-        tmp.write_text(config.to_toml(), encoding="utf-8")
-        tmp.replace(self.meta_dir / CONFIG)
+        _write_config(self.meta_dir, config)
         self.config = config
 
     def security(self) -> Security | None:
@@ -329,6 +372,38 @@ class Repository:
         """The pid file's record if its daemon is gone, else None."""
         record = self.read_peer_record()
         return record if record is not None and not self.peer_locked() else None
+
+
+def _write_config(meta: Path, config: RepoConfig) -> None:
+    """Write `config.toml` atomically (readers see the old file or the new one)."""
+    tmp = meta / (CONFIG + ".tmp")
+    tmp.write_text(config.to_toml(), encoding="utf-8")
+    tmp.replace(meta / CONFIG)
+
+
+def _refuse_a_kept_store(path: Path) -> None:
+    """Refuse to `init` over a store that holds a map but lost its config: a new
+    peer id would lock the peer out of its own chunks. An empty store (an `init`
+    that stopped before writing the config) is taken over.
+
+    Raises:
+        ConfigLost: naming what the store holds and how to recover.
+    """
+    if not path.exists() or not path.stat().st_size:
+        return
+    store = SqliteStore(path)
+    try:
+        commits, chunks = len(store.commits()), len(store.chunks())
+        tables = len(store.tables())
+    finally:
+        store.close()
+    if commits or chunks or tables:
+        raise ConfigLost(
+            f"{path.parent} has no {CONFIG}, but its store holds a map ({commits} commit(s), "
+            f"{chunks} chunk(s), {tables} table(s)); a new peer id would lock this peer out "
+            "of its own chunks: run `mapctl init --recover` to rebuild the config from the "
+            "store (or move the store away to start afresh)"
+        )
 
 
 def _make_keys(meta: Path) -> None:

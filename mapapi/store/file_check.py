@@ -12,12 +12,20 @@ from __future__ import annotations
 import functools
 import os
 import sqlite3
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
-from mapapi.core.errors import CorruptRepoError, RepoError
+from mapapi.core.errors import CorruptPayload, CorruptRepoError, MapError, NoSpaceLeft, RepoError
+from mapapi.core.history import Revision
 
 SQLITE_HEADER = b"SQLite format 3\x00"
 _RESTORE = "restore it from a backup or clone the repository again"
+
+NEARLY_FULL = 1024 * 1024
+"""Free bytes below which a SQLite I/O error is read as a full disk: SQLite
+reports a write it could not make as SQLITE_FULL, but a shared-memory index
+(`-shm`) or a journal it could not grow as SQLITE_IOERR."""
 
 
 def check_file(path: Path) -> None:
@@ -49,6 +57,43 @@ def check_file(path: Path) -> None:
             f"{path} is not a mapapi store: not even a SQLite database (it starts {head!r}); "
             f"{_RESTORE}"
         )
+
+
+def storage_error(path: Path, exc: sqlite3.Error) -> MapError | None:
+    """The honest error for a SQLite failure of the store at `path` that is no
+    damage of it: a full disk, or the disk failing to read or write; None for
+    anything else (the caller's error stands).
+
+    A full disk used to read as "not a mapapi store ... restore it from a backup",
+    advice that loses data: SQLite refuses a write it cannot make whole, so the
+    store is intact and only the failed command's change is not in it.
+    """
+    primary = getattr(exc, "sqlite_errorcode", -1) & 0xFF
+    folder = path.parent
+    if primary == sqlite3.SQLITE_FULL or (
+        primary == sqlite3.SQLITE_IOERR and _free_bytes(folder) < NEARLY_FULL
+    ):
+        return NoSpaceLeft(
+            f"no space left on the disk of {folder} ({_free_bytes(folder)} bytes free; "
+            f"SQLite: {exc}): the store is intact (the write that failed was undone whole); "
+            "free some space, then run it again"
+        )
+    if primary == sqlite3.SQLITE_IOERR:
+        return RepoError(
+            f"cannot read or write {path}: {exc} ({getattr(exc, 'sqlite_errorname', '')}), "
+            "a failure of the disk or its file system rather than of the store; check the "
+            "disk (`dmesg`, `df`), then run the command again"
+        )
+    return None
+
+
+def _free_bytes(folder: Path) -> int:
+    """Bytes this user may still write on the file system of `folder` (unknown: a lot)."""
+    try:
+        stat = os.statvfs(folder)
+    except OSError:
+        return sys.maxsize
+    return stat.f_bavail * stat.f_frsize
 
 
 def check_schema(con: sqlite3.Connection, path: Path, schema: str, fmt: str, version: int) -> None:
@@ -97,3 +142,22 @@ def _tables(schema: str) -> dict[str, list[str]]:
         return {n: [r[1] for r in con.execute(f"PRAGMA table_info({n})")] for n in names}
     finally:
         con.close()
+
+
+def locate_payload(exc: CorruptPayload, store: object) -> CorruptPayload | None:
+    """`exc` naming the store's file and the items whose revisions hold its bytes
+    (a scan of the table's revisions: only ever on this error's path), or None
+    when it names them already.
+
+    Args:
+        store: the `Store` the payload was read from (a file store has a `path`).
+    """
+    if exc.where:
+        return None
+    chunks = getattr(store, "chunks", None)
+    revisions: Callable[[object], list[Revision]] | None = getattr(store, "chunk_revisions", None)
+    items: set[str] = set()
+    if chunks is not None and revisions is not None:
+        for chunk in chunks(exc.table):
+            items.update(str(r.item_id) for r in revisions(chunk.id) if r.data == exc.data)
+    return exc.at(getattr(store, "path", "the store"), sorted(items))

@@ -20,7 +20,7 @@ from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import raft_sql
 from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord
-from mapapi.store.file_check import check_file, check_schema
+from mapapi.store.file_check import check_file, check_schema, storage_error
 
 FORMAT = "mapapi-store"
 SCHEMA_VERSION = 1
@@ -104,7 +104,8 @@ class SqliteStore:
             raise
         except sqlite3.DatabaseError as exc:
             self.close()
-            raise CorruptRepoError(
+            # A full or failing disk is no damage of the store: say so (issue 18).
+            raise storage_error(self.path, exc) or CorruptRepoError(
                 f"{self.path} is not a mapapi store ({exc}); restore it from a backup "
                 "or clone the repository again"
             ) from exc
@@ -189,15 +190,18 @@ class SqliteStore:
         try:
             con.execute("BEGIN IMMEDIATE")
         except sqlite3.OperationalError as exc:
-            raise LockTimeout(f"repository {self.path} stayed locked: {exc}") from exc
+            locked = LockTimeout(f"repository {self.path} stayed locked: {exc}")
+            raise storage_error(self.path, exc) or locked from exc
         self._local.depth = 1
         try:
             yield
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        else:
             con.execute("COMMIT")
+        except BaseException as exc:
+            if con.in_transaction:  # on a full disk SQLite may have rolled back already
+                con.execute("ROLLBACK")
+            if isinstance(exc, sqlite3.Error) and (honest := storage_error(self.path, exc)):
+                raise honest from exc
+            raise
         finally:
             self._local.depth = 0
 

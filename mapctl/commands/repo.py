@@ -32,6 +32,17 @@ from mapctl.session import Session, json_option, pass_session
     help="Make a secure peer: a keypair and an empty trust list (CurveZMQ). In an "
     "existing open repository, add them and keep its data.",
 )
+@click.option(
+    "--recover",
+    is_flag=True,
+    help="Rebuild a lost config.toml from the store: the peer id (the holder of every "
+    "chunk), its name (its commits), secure if its keys are there.",
+)
+@click.option(
+    "--peer-id",
+    metavar="ID",
+    help="With --recover: the peer id, when the store cannot tell it.",
+)
 @json_option
 def init(
     path: Path,
@@ -39,6 +50,8 @@ def init(
     bounds: tuple[float, ...] | None,
     cells: tuple[int, int, int] | None,
     secure: bool,
+    recover: bool,
+    peer_id: str | None,
     as_json: bool,
 ) -> None:
     """Create an empty map repository in PATH (default: here).
@@ -46,6 +59,8 @@ def init(
     Every peer of a swarm must use the same spatial index (--bounds, --cells):
     a peer with another one is refused when it joins. A secure peer (--secure)
     talks only to secure peers whose keys it trusts (`mapctl trust add`).
+    A repository whose config.toml is lost but whose store holds a map is
+    refused; `--recover` rebuilds its config from the store.
     """
     from mapapi import Repository
     from mapapi.core.errors import AlreadyInitialisedError
@@ -56,15 +71,28 @@ def init(
     grid = SpatialGrid(
         BBox.from_tuple(bounds) if bounds else DEFAULT_BOUNDS, cells or DEFAULT_CELLS
     )
-    try:
-        repo = Repository.init(path, name, grid, secure=secure)
-        made = f"Initialised empty {'secure ' if secure else ''}map repository in {{}}"
-    except AlreadyInitialisedError:
-        if not secure or name or bounds or cells:
-            raise
-        repo = Repository.find(path)
-        repo.make_secure()
-        made = "Made the map repository in {} secure (its data is kept)"
+    if peer_id and not recover:
+        raise click.UsageError("--peer-id goes with --recover")
+    if recover:
+        if secure:
+            raise click.UsageError("--recover finds the keys of a secure repository; drop --secure")
+        repo, identity = Repository.recover(
+            path, name, grid if bounds or cells else None, peer_id=peer_id
+        )
+        made = (
+            f"Recovered the config of the map repository in {{}}: peer id {repo.config.peer_id} "
+            f"({identity.how}), name {repo.config.name!r}"
+        )
+    else:
+        try:
+            repo = Repository.init(path, name, grid, secure=secure)
+            made = f"Initialised empty {'secure ' if secure else ''}map repository in {{}}"
+        except AlreadyInitialisedError:
+            if not secure or name or bounds or cells:
+                raise
+            repo = Repository.find(path)
+            repo.make_secure()
+            made = "Made the map repository in {} secure (its data is kept)"
     security = repo.security()
     info = {
         "path": str(repo.root),
@@ -78,6 +106,12 @@ def init(
         render.emit_json(info)
         return
     render.line(made.format(repo.meta_dir))
+    if recover:
+        render.note(
+            "the spatial index is not kept in the store: this config has "
+            f"{repo.config.spatial.to_config()}; if the swarm uses another, give its "
+            "--bounds and --cells (edit [spatial] in config.toml), or joining is refused"
+        )
     if security is not None:
         render.note(
             f"public key {info['public_key']}: peers that trust it (`mapctl trust add KEY`) "

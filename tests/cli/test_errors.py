@@ -73,7 +73,7 @@ class TestExitCodes:
         outcome = points.main("table", "create", "t", "--type", "no.Such")
         assert outcome.code == 2
         assert len(outcome.err_lines) == 1
-        assert outcome.err_lines[0].startswith("error: unknown message type 'no.Such'")
+        assert outcome.err_lines[0].startswith("error: 'no.Such' is not a table type")
 
     def test_set_with_zero_or_two_chunks_names_the_fix(self, points: Mapctl) -> None:
         points("table", "create", "bare", "--type", "google.protobuf.Struct")

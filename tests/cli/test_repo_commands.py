@@ -77,8 +77,8 @@ class TestTables:
     def test_unknown_type_is_a_usage_error(self, mapctl: Mapctl) -> None:
         result = mapctl.invoke("table", "create", "pts", "--type", "no.such.Message")
         assert isinstance(result.exception, UsageError)
-        assert "unknown message type 'no.such.Message'" in str(result.exception)
-        assert STRUCT in str(result.exception)  # names the built-in types
+        assert "'no.such.Message' is not a table type" in str(result.exception)
+        assert STRUCT in str(result.exception)  # names the table types
         assert mapctl.json("table", "list") == {"tables": []}
 
     def test_duplicate_table_is_a_usage_error(self, points: Mapctl) -> None:
