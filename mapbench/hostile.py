@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
+from google.protobuf import struct_pb2
 from google.protobuf.descriptor import Descriptor, FieldDescriptor
 from google.protobuf.message import Message
 
@@ -338,5 +339,8 @@ _EMBEDDED: dict[str, tuple[Any, ...]] = {
     "member": (None, lookup_pb2.SpatialEntry, lookup_pb2.Subscription),
     "members": (None, lookup_pb2.SpatialEntry),
     "argument": (lookup_pb2.SpatialFilter,),  # a Chord filter's argument
-    "data": (types_pb2.Counter,),  # an item payload of the target's table
+    # An item payload: of the target's table, or a Struct (whose numbers may be
+    # NaN or infinite, `_ODD_FLOATS`), which no Counter table accepts: refused by
+    # the commit check, never stored (issue 18: one value poisoned a table).
+    "data": (types_pb2.Counter, types_pb2.Counter, struct_pb2.Struct),
 }
