@@ -24,7 +24,8 @@ NON_FINITE = ["NaN", "Infinity", "-Infinity"]
 def _one_line_error(outcome_err: str) -> str:
     lines = [line for line in outcome_err.splitlines() if line.strip()]
     assert len(lines) == 1, outcome_err
-    assert "internal error" not in lines[0] and "Traceback" not in outcome_err
+    assert "internal error" not in lines[0]
+    assert "Traceback" not in outcome_err
     return lines[0]
 
 
@@ -34,7 +35,8 @@ class TestNonFiniteNumbers:
         done = points.main("set", "pts", f'{{"pose": {{"x": 1, "y": [0, {token}]}}}}')
         assert done.code == 2
         line = _one_line_error(done.err)
-        assert "pose.y[1]" in line and token in line, line
+        assert "pose.y[1]" in line, line
+        assert token in line
         assert points.json("diff")["changes"] == []  # nothing was staged
 
     @pytest.mark.parametrize("token", NON_FINITE)
@@ -98,7 +100,8 @@ class TestTableNames:
         done = mapctl.main("table", "create", "a" * 2000, "--type", STRUCT)
         assert done.code == 2
         line = _one_line_error(done.err)
-        assert str(limit) in line and "MAX_TEXT['table']" in line, line
+        assert str(limit) in line, line
+        assert "MAX_TEXT['table']" in line
         assert mapctl.json("table", "list")["tables"] == []
 
     def test_the_longest_name_that_travels_is_accepted(self, mapctl: Mapctl) -> None:
@@ -115,7 +118,8 @@ class TestTableTypes:
         done = mapctl.main("table", "create", "t", "--type", type_name)
         assert done.code == 2
         line = _one_line_error(done.err)
-        assert type_name in line and all(t in line for t in TABLE_TYPES), line
+        assert type_name in line, line
+        assert all(t in line for t in TABLE_TYPES)
         assert mapctl.json("table", "list")["tables"] == []
 
     @pytest.mark.parametrize("type_name", TABLE_TYPES)
