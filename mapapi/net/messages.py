@@ -427,6 +427,22 @@ class RaftBatch:
     messages: tuple[RaftMessage, ...]
 
 
+@dataclass(frozen=True, slots=True)
+class RaftPropose:
+    """Ask the chunk's leader to propose an encoded `Proposal` and wait for it."""
+
+    chunk: ChunkId
+    proposal: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftProposed:
+    """The proposal applied at the leader: its commit (None: it wrote nothing)."""
+
+    record: CommitRecord | None
+    revisions: tuple[Revision, ...]
+
+
 SWARM_BODIES: dict[str, type] = {
     "ack": Ack,
     "lock_request": LockRequest,
@@ -466,4 +482,6 @@ SWARM_BODIES: dict[str, type] = {
     "evict_commit": EvictCommit,
     "evicted": Evicted,
     "raft_batch": RaftBatch,
+    "raft_propose": RaftPropose,
+    "raft_proposed": RaftProposed,
 }

@@ -14,18 +14,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from mapapi.core import codec
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import (
     CommitUncertain,
     ConflictError,
     LockNotHeld,
     LockTimeout,
-    UsageError,
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import (
     Change,
     Conflict,
@@ -42,7 +39,6 @@ if TYPE_CHECKING:  # the network stack loads only for a peer on the network
     from collections.abc import Awaitable, Callable, Sequence
 
     from mapapi.swarm.commit_check import CommitRule
-    from mapapi.swarm.groups import RaftGroups
     from mapapi.swarm.lock_client import Held, LockService
     from mapapi.swarm.replication import Replicator
 
@@ -233,32 +229,3 @@ async def commit_distributed(
             await locks.release(mine)
     tx.committed(decision.revisions)
     return decision.record
-
-
-async def commit_through_log(
-    groups: RaftGroups,
-    chunk: ChunkId,
-    tx: Transaction,
-    message: str,
-    clock: LamportClock,
-) -> Decision:
-    """Commit `tx`'s writes to `chunk` through the chunk's Raft group (DESIGN §13),
-    which this peer leads: every holder decides the proposal in log order alike.
-
-    Raises:
-        ConflictError: someone changed an item of `tx` since its begin time.
-        UsageError: a commit rule refused the changes.
-        NotChunkLeader: another peer leads the chunk (retry there).
-        RequestTimeout: no majority of the chunk's voters took the entry.
-    """
-    proposal = Proposal.of(tx, chunk, message, clock.tick())
-    applied = await groups.propose(chunk, codec.encode_proposal(proposal))
-    outcome = applied.result
-    assert isinstance(outcome, apply.Outcome)  # the peer's groups apply with `apply.applier`
-    clock.advance_to(applied.time)
-    if outcome.conflicts:
-        raise ConflictError(list(outcome.conflicts), tx, seen_at=groups.store.raft_time(chunk))
-    if outcome.refusal:
-        raise UsageError(outcome.refusal)
-    tx.committed(list(outcome.revisions))
-    return Decision(outcome.record, list(outcome.revisions))

@@ -15,15 +15,18 @@ import pytest
 
 from mapapi.core import codec
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import RequestTimeout
+from mapapi.core.errors import ConflictError, RequestTimeout
+from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Op
+from mapapi.core.table import TableDescriptor
+from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, applier
 from mapapi.swarm.groups import Applied, NotChunkLeader, RaftGroups
+from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
 
 TIMEOUT = 10.0
@@ -285,3 +288,77 @@ async def test_a_dead_voter_is_removed_and_a_learner_promoted(world: World) -> N
     assert not config.learners
     await propose_all(leader, CHUNK, [b"after"])
     await fourth.wait(lambda: fourth.applied.get(CHUNK, [])[-1:] == [b"after"])
+
+
+# -- writers anywhere: a follower's transaction goes to the leader -----------------------
+class Writer(Ledger):
+    """A peer whose transactions commit through the chunks' logs (`LogCommits`)."""
+
+    def __init__(self, world: World, peer: PeerId, path: Path) -> None:
+        super().__init__(world, peer, path)
+        self.commits = LogCommits(
+            self.groups, self.rpc, lambda p: world.addresses[p], LamportClock()
+        )
+
+    # the TransactionBackend a Transaction needs
+    name = "writer"
+
+    def table(self, name: str) -> TableDescriptor:
+        return TableDescriptor(name, "google.protobuf.Struct")
+
+    def chunk_table(self, chunk_id: ChunkId) -> str:
+        return self.store.chunk_table(chunk_id)
+
+    def read_local(self, item_id: ItemId, time: int) -> Revision | None:
+        return self.store.read(item_id, time)
+
+    async def read(self, item_id: ItemId, time: int) -> Revision | None:
+        return self.store.read(item_id, time)
+
+    async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
+        return self.store.scan(time, table, chunk)
+
+    async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
+        return (await self.commits.commit(CHUNK, tx, message)).record
+
+
+async def writers(world: World) -> tuple[list[Writer], Writer]:
+    nodes = [await world.add(kind=Writer) for _ in range(3)]
+    for node in nodes:
+        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_chunk(CHUNK, "counters")
+        node.groups.found(CHUNK, [n.id for n in nodes])
+    leader = await leader_of(nodes, CHUNK)
+    for node in nodes:
+        await node.wait(lambda node=node: node.groups.leader(CHUNK) == leader.id)
+    return nodes, leader  # type: ignore[return-value]
+
+
+def tx_of(node: Writer, data: bytes, op: Op = Op.UPDATE) -> Transaction:
+    tx = Transaction(node, node.store.raft_time(CHUNK), node.id)
+    tx.stage(Change(op, "counters", COUNTER, CHUNK, data))
+    return tx
+
+
+async def test_a_followers_transaction_commits_through_the_leader(world: World) -> None:
+    nodes, leader = await writers(world)
+    follower = next(n for n in nodes if n is not leader)
+    record = await tx_of(follower, b"1", Op.INSERT).commit("from a follower")
+    assert record is not None
+    for node in nodes:
+        await node.wait(lambda node=node: node.store.commit_record(record.id) == record)
+
+
+async def test_a_conflict_reaches_a_follower_mergeable(world: World) -> None:
+    nodes, leader = await writers(world)
+    first, second = (n for n in nodes if n is not leader)
+    await tx_of(first, b"0", Op.INSERT).commit("a0")
+    await second.wait(lambda: second.store.latest([COUNTER]) != {})
+    ours, theirs = tx_of(first, b"1"), tx_of(second, b"2")
+    await ours.commit("first")
+    with pytest.raises(ConflictError) as caught:
+        await theirs.commit("second")
+    assert [c.item_id for c in caught.value.conflicts] == [COUNTER]
+    merged = caught.value.merge()  # the transaction lives here: it merges here
+    merged.stage(Change(Op.UPDATE, "counters", COUNTER, CHUNK, b"3"))
+    assert await merged.commit("merged") is not None

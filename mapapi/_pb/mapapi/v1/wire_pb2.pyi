@@ -9,7 +9,7 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Envelope(_message.Message):
-    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "commit_status_query", "commit_status", "evict_request", "evict_grant", "evict_commit", "evicted", "raft_batch")
+    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "commit_status_query", "commit_status", "evict_request", "evict_grant", "evict_commit", "evicted", "raft_batch", "raft_propose", "raft_proposed")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Envelope.Kind]
@@ -65,6 +65,8 @@ class Envelope(_message.Message):
     EVICT_COMMIT_FIELD_NUMBER: _ClassVar[int]
     EVICTED_FIELD_NUMBER: _ClassVar[int]
     RAFT_BATCH_FIELD_NUMBER: _ClassVar[int]
+    RAFT_PROPOSE_FIELD_NUMBER: _ClassVar[int]
+    RAFT_PROPOSED_FIELD_NUMBER: _ClassVar[int]
     request_id: int
     sender: bytes
     lamport: int
@@ -110,7 +112,9 @@ class Envelope(_message.Message):
     evict_commit: EvictCommit
     evicted: Evicted
     raft_batch: RaftBatch
-    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., commit_status_query: _Optional[_Union[CommitStatusQuery, _Mapping]] = ..., commit_status: _Optional[_Union[CommitStatus, _Mapping]] = ..., evict_request: _Optional[_Union[EvictRequest, _Mapping]] = ..., evict_grant: _Optional[_Union[EvictGrant, _Mapping]] = ..., evict_commit: _Optional[_Union[EvictCommit, _Mapping]] = ..., evicted: _Optional[_Union[Evicted, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ...) -> None: ...
+    raft_propose: RaftPropose
+    raft_proposed: RaftProposed
+    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., commit_status_query: _Optional[_Union[CommitStatusQuery, _Mapping]] = ..., commit_status: _Optional[_Union[CommitStatus, _Mapping]] = ..., evict_request: _Optional[_Union[EvictRequest, _Mapping]] = ..., evict_grant: _Optional[_Union[EvictGrant, _Mapping]] = ..., evict_commit: _Optional[_Union[EvictCommit, _Mapping]] = ..., evicted: _Optional[_Union[Evicted, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ..., raft_propose: _Optional[_Union[RaftPropose, _Mapping]] = ..., raft_proposed: _Optional[_Union[RaftProposed, _Mapping]] = ...) -> None: ...
 
 class ErrorReply(_message.Message):
     __slots__ = ("code", "message", "conflicts", "seen_at")
@@ -555,3 +559,19 @@ class RaftBatch(_message.Message):
     MESSAGES_FIELD_NUMBER: _ClassVar[int]
     messages: _containers.RepeatedCompositeFieldContainer[RaftMessage]
     def __init__(self, messages: _Optional[_Iterable[_Union[RaftMessage, _Mapping]]] = ...) -> None: ...
+
+class RaftPropose(_message.Message):
+    __slots__ = ("chunk", "proposal")
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    PROPOSAL_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    proposal: bytes
+    def __init__(self, chunk: _Optional[bytes] = ..., proposal: _Optional[bytes] = ...) -> None: ...
+
+class RaftProposed(_message.Message):
+    __slots__ = ("record", "revisions")
+    RECORD_FIELD_NUMBER: _ClassVar[int]
+    REVISIONS_FIELD_NUMBER: _ClassVar[int]
+    record: _core_pb2.CommitRecord
+    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
+    def __init__(self, record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ...) -> None: ...
