@@ -1,7 +1,8 @@
 """Pytest plugin: fixtures that build real peers and repositories and clean up.
 
 Registered through the `pytest11` entry point, so `mapctl` tests and users'
-own test suites get them too.
+own test suites get them too. Their peers are the application's (`mapapi.app`):
+they keep the map tables' rules, as `mapctl` and the daemon's do.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from typing import Any
 
 import pytest
 
+from mapapi.app import memory_peer as app_memory_peer
+from mapapi.app import peer_of
 from mapapi.lookup.spatial import SpatialGrid
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
@@ -76,7 +79,7 @@ async def make_peer(
         name: str | None = None, spatial: SpatialGrid | None = None, *, secure: bool = False
     ) -> Peer:
         repo = make_repo(name, spatial, secure=secure)
-        peer = Peer.of(repo)
+        peer = peer_of(repo)
         peers.append(peer)
         return peer
 
@@ -88,7 +91,7 @@ async def make_peer(
 @pytest.fixture
 def memory_peer() -> Iterator[Peer]:
     """A scratch peer on an in-memory store."""
-    peer = Peer.in_memory()
+    peer = app_memory_peer()
     yield peer
     peer.store.close()
 

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mapapi.app import peer_of
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.table import message_class
 from mapapi.service.peer import Peer
@@ -69,7 +70,7 @@ def run_local(commits: int, directory: str | Path | None = None) -> dict[str, An
 
 
 async def _measure_commits_and_reads(repo: Repository, commits: int) -> dict[str, Any]:
-    peer = Peer.of(repo)
+    peer = peer_of(repo)  # the application's peer, with the map tables' rules
     try:
         await peer.create_table(TABLE, TYPE)
         chunk = await peer.create_chunk(TABLE)

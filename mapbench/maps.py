@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from mapapi.app import memory_peer, peer_of
 from mapapi.core.errors import UsageError
 from mapapi.maps.importer import MapSource, import_missions
 from mapapi.maps.source import read_source
@@ -93,10 +94,10 @@ def _one_run(
     sources = read_source(path)
     parse = time.perf_counter() - start
     if store == "memory":
-        return (parse, *asyncio.run(_import(Peer.in_memory(), sources)))
+        return (parse, *asyncio.run(_import(memory_peer(), sources)))
     with tempfile.TemporaryDirectory(prefix="mapapi-bench-", dir=directory) as tmp:
         repo = Repository.init(Path(tmp) / "repo", "bench")
-        return (parse, *asyncio.run(_import(Peer.of(repo), sources)))
+        return (parse, *asyncio.run(_import(peer_of(repo), sources)))
 
 
 async def _import(peer: Peer, sources: Sequence[MapSource]) -> tuple[float, float, int, int]:

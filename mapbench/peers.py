@@ -16,6 +16,7 @@ from contextlib import asynccontextmanager
 
 from mapapi.core.ids import PeerId
 from mapapi.lookup.spatial import SpatialGrid
+from mapapi.maps.rules import map_rules
 from mapapi.net.shaping import Shaper
 from mapapi.net.stats import Stats
 from mapapi.service.peer import Peer
@@ -56,7 +57,11 @@ async def settled_peers(
     peers: list[Peer] = []
     try:
         for _ in range(count):
-            peer = Peer(MemoryStore(), PeerId(f"{rng.getrandbits(128):032x}"), grid=grid)
+            # the map tables' rules, as every peer of the application keeps them
+            rules = map_rules()
+            peer = Peer(
+                MemoryStore(), PeerId(f"{rng.getrandbits(128):032x}"), grid=grid, rules=rules
+            )
             peers.append(peer)
             await peer.start("tcp://127.0.0.1:0", chord=chord, shaper=shaper())
             if len(peers) > 1:

@@ -46,6 +46,7 @@ from collections import Counter as Tally
 from pathlib import Path
 from typing import Any
 
+from mapapi.app import peer_of
 from mapapi.core.errors import ConflictError, LockTimeout, MapError, UsageError
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.table import message_class
@@ -226,7 +227,7 @@ async def _stdin_lines() -> asyncio.StreamReader:
 async def serve(args: argparse.Namespace) -> None:
     """Start the peer, announce it, and answer commands until quit or EOF."""
     repo = open_repo(Path(args.repo), args.name or Path(args.repo).name, args.secure)
-    peer = Peer.of(repo)
+    peer = peer_of(repo)  # the application's peer, with the map tables' rules
     try:
         address = await peer.start(args.listen, lease=args.lease)
         _say("ready", {"id": str(peer.id), "address": address, "name": peer.name})

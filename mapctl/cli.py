@@ -64,12 +64,14 @@ def main() -> None:
         click.echo("interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
     except Exception as exc:
-        from mapapi.core.errors import MapError
+        from mapapi import MapError
 
         if verbose:
             traceback.print_exc()
         if isinstance(exc, MapError):
             click.secho(f"error: {exc}", fg="red", err=True)
+            for note in getattr(exc, "__notes__", ()):  # what the library adds on the way up
+                click.secho(note, dim=True, err=True)
             sys.exit(exc.exit_code)
         outside = _outside_error(exc)
         if outside is not None:

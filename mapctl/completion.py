@@ -23,7 +23,7 @@ import click
 from click.shell_completion import CompletionItem, get_completion_class
 
 if TYPE_CHECKING:
-    from mapapi.store.sqlite import SqliteStore
+    from mapapi import Store
 
 SHELLS = ("bash", "zsh", "fish")
 PROG, COMPLETE_VAR = "mapctl", "_MAPCTL_COMPLETE"
@@ -34,7 +34,7 @@ Completer = Callable[[click.Context, click.Parameter, str], list[CompletionItem]
 
 
 @contextlib.contextmanager
-def _store(ctx: click.Context) -> Iterator[SqliteStore]:
+def _store(ctx: click.Context) -> Iterator[Store]:
     """The store of the repository the command line names (`-C`, else the cwd)."""
     from mapapi import Repository
 
@@ -78,7 +78,7 @@ def views(ctx: click.Context, incomplete: str) -> list[CompletionItem]:
 
 def missions(ctx: click.Context, incomplete: str) -> list[CompletionItem]:
     """Mission names held here, with their robot as help."""
-    from mapapi.maps.schema import MISSIONS, Mission
+    from mapapi import MISSIONS, Mission
 
     with _store(ctx) as store:
         if MISSIONS not in store.tables():

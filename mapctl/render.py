@@ -10,7 +10,7 @@ import json
 import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from typing import Any
 
 from rich.console import Console
@@ -196,3 +196,68 @@ def steps() -> Iterator[Callable[[str, str], None]]:
         return
     with status:
         yield show
+
+
+@contextmanager
+def chunk_transfers() -> Iterator[Callable[[str, int, int], None]]:
+    """`transfer` bars for chunks fetched one after another (`clone`).
+
+    Yields:
+        `show(chunk, done, total)`: a chunk not seen before ends the bar of the
+        previous one and begins its own.
+    """
+    with ExitStack() as stack:
+        current: list[tuple[str, Callable[[int, int], None]]] = []
+
+        def show(chunk: str, done: int, total: int) -> None:
+            if not current or current[-1][0] != chunk:
+                stack.close()
+                bar = stack.enter_context(transfer(f"fetching chunk {chunk[:8]} with its history"))
+                current[:] = [(chunk, bar)]
+            current[-1][1](done, total)
+
+        yield show
+
+
+def cloned(address: str, info: dict[str, Any], peer_name: str, *, as_json: bool) -> None:
+    """What `clone` made: its path, peer and chunks (`Cloned.to_json()`)."""
+    if as_json:
+        emit_json(info)
+        return
+    items = sum(c["items"] for c in info["chunks"])
+    line(
+        f"cloned {address} into {info['path']}: peer {peer_name} at {info['address']}, "
+        f"{len(info['chunks'])} chunk(s), {items} item(s)",
+        "green",
+    )
+
+
+def json_line(value: Any) -> None:
+    """One JSON document on one line, flushed at once (a stream scripts read)."""
+    sys.stdout.write(json.dumps(value) + "\n")
+    sys.stdout.flush()
+
+
+class ChangeRows:
+    """Changes `watch` reports, as rows of a table that grows as they come."""
+
+    def __init__(self) -> None:
+        self.header_done = False
+
+    def add(self, change: dict[str, Any]) -> None:
+        """Print one change (the header with the first)."""
+        grid = Table(show_header=not self.header_done, box=None, pad_edge=False)
+        for name, width in (("time", 6), ("commit", 8), ("kind", 8), ("table", 10), ("id", 8)):
+            grid.add_column(name, width=width, no_wrap=True)
+        grid.add_column("data", overflow="fold")
+        data = "-" if change["data"] is None else json.dumps(change["data"], sort_keys=True)
+        grid.add_row(
+            str(change["time"]),
+            change["commit"][:8],
+            change["kind"],
+            change["table"],
+            change["id"][:8],
+            data,
+        )
+        console.print(grid)
+        self.header_done = True

@@ -4,32 +4,24 @@ from __future__ import annotations
 
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 if TYPE_CHECKING:
     import asyncio
 
-    from mapapi.service.peer import Peer
+    from mapapi import Operations, RemoteOperations
 
 T = TypeVar("T")
 
-PROGRESS_POLL_S = 0.2
 Progress = Callable[[Any], None]  # gets each answer of a progress operation
-
-
-class Ops(Protocol):
-    """`mapapi.service.ops.Operations`, or `mapapi.service.control.RemoteOperations` in a daemon."""
-
-    async def call(self, op: str, args: dict[str, Any]) -> Any:
-        """Run one operation; its JSON result."""
 
 
 class Session:
     """Opens the repository lazily and closes it when the command ends.
 
-    Commands call `call(op, **args)`: one JSON operation of `mapapi.service.ops`. While
+    Commands call `call(op, **args)`: one JSON operation of `mapapi.Operations`. While
     a peer daemon runs on the repository (`mapctl peer start`), every operation
     goes to it over its control endpoint; otherwise it runs on the repository's
     embedded peer in this process (DESIGN §9).
@@ -39,35 +31,24 @@ class Session:
         self.path = path
         self.view = view
         self.verbose = verbose
-        self._ops: Ops | None = None
-        self._peer: Peer | None = None
+        self._ops: Operations | RemoteOperations | None = None
         self._runner: asyncio.Runner | None = None
 
     @property
-    def ops(self) -> Ops:
+    def ops(self) -> Operations | RemoteOperations:
         """The operations: the running daemon's, else the embedded peer's (on first use)."""
         if self._ops is None:
-            from mapapi.service.repo import Repository
+            from mapapi import attach
 
-            repo = Repository.find(self.path)
-            record = repo.running_peer()
-            if record is not None:
-                from mapapi.service.control import RemoteOperations
-
-                self._ops = RemoteOperations.of(repo, record, alive=repo.peer_locked)
-            else:
-                from mapapi.service.ops import Operations
-                from mapapi.service.peer import Peer
-
-                self._peer = Peer.of(repo)
-                self._ops = Operations(self._peer)
+            self._ops = attach(self.path)
         return self._ops
 
     @property
     def remote(self) -> bool:
         """True when the operations go to a running peer daemon."""
-        self.ops  # noqa: B018  (opens it: decides where the operations go)
-        return self._peer is None
+        from mapapi import RemoteOperations
+
+        return isinstance(self.ops, RemoteOperations)
 
     def run(self, coro: Coroutine[Any, Any, T]) -> T:
         """Run a coroutine on the session's event loop (one loop per command)."""
@@ -86,36 +67,23 @@ class Session:
     ) -> Any:
         """Run operation `op` while asking operation `poll` (name, arguments)
         how far it got, every 0.2 s; `show` gets each answer."""
-        return self.run(self._polled(op, args, poll, show))
+        from mapapi import call_polled
 
-    async def _polled(
-        self, op: str, args: dict[str, Any], poll: tuple[str, dict[str, Any]], show: Progress
-    ) -> Any:
-        import asyncio
-
-        call = asyncio.ensure_future(self.ops.call(op, args))
-        try:
-            while True:
-                done, _ = await asyncio.wait({call}, timeout=PROGRESS_POLL_S)
-                if done:
-                    return call.result()
-                show(await self.ops.call(*poll))
-        finally:
-            if not call.done():
-                call.cancel()
+        return self.run(call_polled(self.ops, op, args, poll, show))
 
     def close(self) -> None:
         """Release the repository, or the connection to its daemon."""
         ops, self._ops = self._ops, None
-        close = getattr(ops, "close", None)
-        if close is not None and self._runner is not None:
-            self._runner.run(close())
+        if ops is not None:
+            from mapapi import RemoteOperations
+
+            if not isinstance(ops, RemoteOperations):
+                ops.peer.store.close()  # the embedded peer: never on the network
+            elif self._runner is not None:
+                self._runner.run(ops.close())
         if self._runner is not None:
             self._runner.close()
             self._runner = None
-        if self._peer is not None:
-            self._peer.store.close()
-            self._peer = None
 
 
 pass_session = click.make_pass_decorator(Session)

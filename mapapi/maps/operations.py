@@ -1,29 +1,42 @@
-"""The map operations of `mapctl` (import, export, missions, plot), JSON in and out.
+"""The map operations of `mapctl` (import, export, missions, plot, loading by box),
+JSON in and out.
 
-`MapOperations` is a mixin of `mapapi.service.ops.Operations`, so these run in the
-peer daemon when one runs, like every other operation. File paths are the
-caller's; `mapctl` sends them absolute, since the daemon's working folder is
-not the caller's. Reading files and drawing run in a worker thread, so the peer
-keeps serving (and `import_progress` answers) meanwhile. The readers, which
-need numpy, are imported when first used: every `mapctl` command imports this.
+`MapOperations` is one of the operation sets of `mapapi.service.ops.Operations`
+(`mapapi.app` adds it to the service's), so these run in the peer daemon when
+one runs, like every other operation. File paths are the caller's; `mapctl`
+sends them absolute, since the daemon's working folder is not the caller's.
+Reading files and drawing run in a worker thread, so the peer keeps serving
+(and `import_progress` answers) meanwhile. The readers, which need numpy, are
+imported when first used: every `mapctl` command imports this.
+
+`load_bbox` makes "load what lies in this box" one operation, so the CLI and
+`mapctl demo` share it: participate in every chunk found that is not held
+here, then in the other chunks of each mission found. A mission's edges have
+no position, so the spatial index never lists their chunk; the mission's row
+names it (`Mission.chunks`), and it is read once the row's chunk is here.
+`load_progress` answers how far a running `load_bbox` got.
 """
 
 from __future__ import annotations
 
 import asyncio
 import fnmatch
+import json
 import os
 import time
-from functools import cached_property, partial
+from collections.abc import Mapping
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mapapi.core.errors import UsageError
-from mapapi.core.ids import PeerId
+from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.schema import MISSIONS
+from mapapi.service.ops import Operation
+from mapapi.service.transfer_ops import online, placed_json
 
 if TYPE_CHECKING:
     from mapapi.maps.cloud import PointCloud
@@ -58,19 +71,29 @@ def member_json(member: Member) -> Json:
     return {"id": member.id, "name": member.name, "address": member.address}
 
 
+def _load_key(bbox: list[float], table: str | None) -> str:
+    return json.dumps([list(bbox), table])
+
+
 class MapOperations:
-    """Map operations over `self.peer` (see the module docstring)."""
+    """Map operations over one peer (see the module docstring)."""
 
-    peer: Peer
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+        self._imports: dict[str, tuple[int, int]] = {}  # path -> (done, total) of an import
+        self._loads: dict[str, tuple[int, int]] = {}  # load key -> (loaded, to load so far)
 
-    def _on_swarm(self) -> Peer:
-        """The peer, which must be on the network (Operations refines the error)."""
-        raise NotImplementedError
-
-    @cached_property
-    def _imports(self) -> dict[str, tuple[int, int]]:
-        """Path -> (done, total) of each import running here."""
-        return {}
+    def operations(self) -> Mapping[str, Operation]:
+        """See `mapapi.service.ops.OperationSet`."""
+        return {
+            "import_map": self.import_map,
+            "import_progress": self.import_progress,
+            "export_map": self.export_map,
+            "missions": self.missions,
+            "plot_map": self.plot_map,
+            "load_bbox": self.load_bbox,
+            "load_progress": self.load_progress,
+        }
 
     async def import_map(
         self,
@@ -148,7 +171,7 @@ class MapOperations:
         `swarm`, also those the spatial index lists on other peers (counts None)."""
         from mapapi.maps.stored import list_missions
 
-        peer = self._on_swarm() if swarm else self.peer
+        peer = online(self.peer) if swarm else self.peer
         held = await list_missions(peer)
         rows = [self._mission_json(info) for info in held]
         if swarm:
@@ -227,6 +250,52 @@ class MapOperations:
             "missions": drawn.missions,
             "bbox": _box(box),
         }
+
+    async def load_bbox(self, bbox: list[float], table: str | None = None) -> Json:
+        """Participate in every chunk in `bbox` (of `table`) not held here, and in
+        the other chunks of the missions found; the query's results afterwards
+        (every chunk now held) and `loaded`: each chunk fetched, in order.
+
+        Raises:
+            PeerNotRunning: a chunk must be fetched but the peer is off the network.
+        """
+        from mapapi.maps.stored import mission_chunks
+
+        key = _load_key(bbox, table)
+        found = await self._query(bbox, table)
+        todo = [ChunkId(r["chunk"]) for r in found if not r["held"]]
+        loaded: list[Json] = []
+        self._loads[key] = (0, len(todo))
+        try:
+            loaded += [await self._load(key, chunk, todo) for chunk in todo]
+            names = {name for r in found for name in r["missions"]}
+            held = {c.id for c in self.peer.chunks()}
+            parts = await mission_chunks(self.peer, names)
+            more = sorted({c for tables in parts.values() for c in tables.values()} - held)
+            todo += more
+            loaded += [await self._load(key, chunk, todo) for chunk in more]
+        finally:
+            self._loads.pop(key, None)
+        results = await self._query(bbox, table) if loaded else found
+        return {"results": results, "loaded": loaded}
+
+    async def _query(self, bbox: list[float], table: str | None) -> list[Json]:
+        found = await self.peer.query_bbox(BBox.from_tuple(bbox), table)
+        return [placed_json(f) for f in found]
+
+    async def _load(self, key: str, chunk: ChunkId, todo: list[ChunkId]) -> Json:
+        peer = online(self.peer)
+        table = await peer.participate(chunk)
+        self._loads[key] = (todo.index(chunk) + 1, len(todo))
+        items = next((c.items for c in peer.chunks() if c.id == chunk), 0)
+        return {"chunk": chunk, "table": table, "items": items}
+
+    async def load_progress(self, bbox: list[float], table: str | None = None) -> Json:
+        """How far a running `load_bbox(bbox, table)` got: chunks loaded of the
+        chunks known to load so far (0 of 0 before the query answers, or when
+        none runs)."""
+        done, total = self._loads.get(_load_key(bbox, table), (0, 0))
+        return {"loaded": done, "of": total}
 
 
 def _absolute(path: str) -> Path:

@@ -1,9 +1,10 @@
 """The rules of a mission's pose graph, checked by the writer at every commit
 (issue 15): a vertex index is unique in its mission, and an edge's ends exist.
 
-`MissionRules` is a `CommitRule` every `Peer` gets at construction (DESIGN
-"hooks passed in at construction"), so the rules hold whoever commits: `mapctl
-set`, a script through the library, an import. It runs on the writer's replica
+`MissionRules` is a `CommitRule` every peer of the application (`mapapi.app`)
+gets at construction (DESIGN "hooks passed in at construction"), so the rules
+hold whoever commits through it: `mapctl set`, the daemon, a script that opens
+`mapapi.open_peer`, an import. It runs on the writer's replica
 while the commit holds the chunks' locks, so two racing commits to one
 mission's chunk cannot both pass.
 

@@ -32,8 +32,12 @@ from mapapi.service.repo import PeerLock, PeerRecord
 
 if TYPE_CHECKING:
     from mapapi.service.control import ControlServer
+    from mapapi.service.ops import OperationsFactory
     from mapapi.service.peer import Peer
     from mapapi.service.repo import Repository
+
+PeerFactory = Callable[["Repository"], "Peer"]
+"""What opens a repository's peer (`mapapi.app.peer_of`: with the application's rules)."""
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +155,8 @@ async def serve(
     listen: str = "tcp://127.0.0.1:0",
     join: Sequence[str] = (),
     *,
+    open_peer: PeerFactory,
+    operations: OperationsFactory,
     advertise: str | None = None,
     stop: asyncio.Event | None = None,
     ready: Callable[[PeerRecord], None] | None = None,
@@ -162,6 +168,8 @@ async def serve(
         repo: the repository.
         listen: the swarm endpoint; port 0 picks a free port.
         join: addresses of members to join through.
+        open_peer: opens the repository's peer (the application's, `mapapi.app`).
+        operations: builds the operations the control endpoint serves over it.
         advertise: the address to tell other peers (default: the bound one,
             see `advertised_address`).
         stop: set it to stop gracefully.
@@ -173,17 +181,13 @@ async def serve(
         NetworkError: `listen` cannot be bound, or no seed answered.
     """
     from mapapi.service.control import ControlServer
-    from mapapi.service.ops import Operations
-    from mapapi.service.peer import Peer
 
     faults.arm_from_env(os.environ)  # failure tests: see mapapi.core.faults
     stop = stop or asyncio.Event()
     lock = PeerLock.acquire(repo)
     try:
-        peer = Peer.of(repo)
-        ops = Operations(peer)
-        ops.on_shutdown = stop.set
-        control = ControlServer(ops)
+        peer = open_peer(repo)
+        control = ControlServer(operations(peer, on_shutdown=stop.set))
         record: PeerRecord | None = None
         keeper: asyncio.Task[None] | None = None
         try:
@@ -279,6 +283,8 @@ def run(
     listen: str = "tcp://127.0.0.1:0",
     join: Sequence[str] = (),
     *,
+    open_peer: PeerFactory,
+    operations: OperationsFactory,
     advertise: str | None = None,
     ready: Callable[[PeerRecord], None] | None = None,
 ) -> None:
@@ -296,7 +302,16 @@ def run(
         for sig in signals:
             loop.add_signal_handler(sig, stop.set)
         try:
-            await serve(repo, listen, join, advertise=advertise, stop=stop, ready=ready)
+            await serve(
+                repo,
+                listen,
+                join,
+                open_peer=open_peer,
+                operations=operations,
+                advertise=advertise,
+                stop=stop,
+                ready=ready,
+            )
         finally:
             for sig in signals:
                 loop.remove_signal_handler(sig)

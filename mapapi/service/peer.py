@@ -58,21 +58,13 @@ class PlacedChunk:
     held: bool
 
 
-def _standard_rules() -> tuple[CommitRule, ...]:
-    """The rules of the tables mapapi ships, the map tables' (a vertex index is
-    unique in its mission, an edge's ends exist). Imported here, not at the top:
-    the application layer sits above the peer and gives them at construction."""
-    from mapapi.maps.rules import map_rules
-
-    return map_rules()
-
-
 class Peer:
     """One peer and its local map repository.
 
     Args:
-        rules: what every commit of this peer must keep (`CommitRule`); by
-            default the map tables' rules, `()` for none.
+        rules: what every commit of this peer must keep (`CommitRule`); none
+            by default. The application gives its own: `mapapi.app` builds
+            peers with the map tables' rules.
     """
 
     def __init__(
@@ -83,11 +75,10 @@ class Peer:
         name: str = "",
         grid: SpatialGrid | None = None,
         security: Security | None = None,
-        rules: Sequence[CommitRule] | None = None,
+        rules: Sequence[CommitRule] = (),
     ) -> None:
         self.store = store
-        # checked by every commit this peer writes; by default the map tables' rules
-        self.rules = tuple(_standard_rules() if rules is None else rules)
+        self.rules = tuple(rules)  # checked by every commit this peer writes
         self.security = security
         self.id = peer_id or PeerId.new()
         self.name = name or self.id.short
@@ -100,14 +91,15 @@ class Peer:
         self._policies: dict[str, MergePolicy] = {}
 
     @classmethod
-    def open(cls, path: str | Path = ".") -> Peer:
-        """The peer of the repository at (or above) `path`."""
-        return cls.of(Repository.find(path))
+    def open(cls, path: str | Path = ".", *, rules: Sequence[CommitRule] = ()) -> Peer:
+        """The peer of the repository at (or above) `path` (`rules`: see `Peer`)."""
+        return cls.of(Repository.find(path), rules=rules)
 
     @classmethod
-    def of(cls, repo: Repository) -> Peer:
+    def of(cls, repo: Repository, *, rules: Sequence[CommitRule] = ()) -> Peer:
         """The peer of `repo`: its store, identity, spatial index geometry and,
-        for a secure repository, its keys and trust list (DESIGN §10)."""
+        for a secure repository, its keys and trust list (DESIGN §10); `rules`:
+        see `Peer`."""
         config = repo.config
         security = repo.security()
         return cls(
@@ -116,12 +108,13 @@ class Peer:
             name=config.name,
             grid=config.spatial,
             security=security,
+            rules=rules,
         )
 
     @classmethod
-    def in_memory(cls) -> Peer:
-        """A scratch peer on a `MemoryStore`."""
-        return cls(MemoryStore())
+    def in_memory(cls, *, rules: Sequence[CommitRule] = ()) -> Peer:
+        """A scratch peer on a `MemoryStore` (`rules`: see `Peer`)."""
+        return cls(MemoryStore(), rules=rules)
 
     async def close(self) -> None:
         """Leave the swarm gracefully (if on one) and release the store.

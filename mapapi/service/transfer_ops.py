@@ -1,27 +1,41 @@
-"""Operations that find and move data between peers: `query_bbox`, `load_bbox`
-(`mapctl query-bbox [--load]`) and the traffic counters.
+"""The swarm's operations (only while the peer daemon runs): membership,
+participation, queries of the spatial index and the traffic counters; a set of
+`mapapi.service.ops.Operations`.
 
-`load_bbox` makes "load what lies in this box" one operation, so the CLI and
-`mapctl demo` share it: participate in every chunk found that is not held
-here, then in the other chunks of each mission found. A mission's edges have
-no position, so the spatial index never lists their chunk; the mission's row
-names it (`Mission.chunks`), and it is read once the row's chunk is here.
-`load_progress` answers how far a running `load_bbox` got.
+Loading what a query finds together with whole missions (`load_bbox`) is a
+map operation: `mapapi.maps.operations`.
 """
 
 from __future__ import annotations
 
-import json
-from functools import cached_property
+import os
+import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from mapapi.core.errors import PeerNotRunning, UsageError
 from mapapi.core.ids import ChunkId
 from mapapi.lookup.spatial import BBox
+from mapapi.service.ops import Operation, check_address, resolve_id
 
 if TYPE_CHECKING:
     from mapapi.service.peer import Peer, PlacedChunk
 
 Json = Any
+
+
+def online(peer: Peer) -> Peer:
+    """`peer`, which must be on the network.
+
+    Raises:
+        PeerNotRunning: it is not (no daemon runs on the repository).
+    """
+    if peer.swarm is None:
+        raise PeerNotRunning(
+            "no peer runs on this repository; start it with `mapctl peer start --detach` "
+            "(or `mapctl peer start` in another terminal)"
+        )
+    return peer
 
 
 def placed_json(found: PlacedChunk) -> Json:
@@ -39,23 +53,128 @@ def placed_json(found: PlacedChunk) -> Json:
     }
 
 
-def _key(bbox: list[float], table: str | None) -> str:
-    return json.dumps([list(bbox), table])
+class SwarmOperations:
+    """The peer's swarm: members, chunks it replicates, spatial queries, traffic."""
 
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+        self._progress: dict[str, tuple[int, int]] = {}  # chunk -> (parts received, parts)
 
-class TransferOperations:
-    """Query and load operations over `self.peer` (see the module docstring)."""
+    def operations(self) -> Mapping[str, Operation]:
+        """See `mapapi.service.ops.OperationSet`."""
+        return {
+            "peer_status": self.peer_status,
+            "peers": self.peers,
+            "join": self.join,
+            "participate": self.participate,
+            "participate_progress": self.participate_progress,
+            "chunk_leave": self.chunk_leave,
+            "swarm_chunks": self.swarm_chunks,
+            "query_bbox": self.query_bbox,
+            "traffic": self.traffic,
+        }
 
-    peer: Peer
+    async def peer_status(self) -> Json:
+        """This peer: id, name, the address others join through, every member."""
+        peer = online(self.peer)
+        assert peer.swarm is not None
+        members = [
+            {"id": m.id, "address": m.address, "name": m.name} for m in peer.swarm.members.all()
+        ]
+        return {
+            "id": peer.id,
+            "name": peer.name,
+            "address": peer.address,
+            "join": peer.address,
+            "pid": os.getpid(),
+            "members": members,
+            "chunks": len(peer.chunks()),
+        }
 
-    def _on_swarm(self) -> Peer:
-        """The peer, which must be on the network (Operations refines the error)."""
-        raise NotImplementedError
+    async def peers(self) -> Json:
+        """The other members: id, address, name, seconds since last heard of
+        (None: never heard from directly) and the chunks both peers hold."""
+        peer = online(self.peer)
+        now = time.monotonic()
+        held = [c.id for c in peer.chunks()]
+        rows = []
+        for state in peer.members():
+            member = state.member
+            seen = state.last_seen
+            rows.append(
+                {
+                    "id": member.id,
+                    "address": member.address,
+                    "name": member.name,
+                    "last_seen": None if seen is None else round(now - seen, 3),
+                    "shared_chunks": [c for c in held if member.id in peer.store.holders(c)],
+                }
+            )
+        return {"peers": rows}
 
-    @cached_property
-    def _loads(self) -> dict[str, tuple[int, int]]:
-        """Key of a running load -> (chunks loaded, chunks to load so far)."""
-        return {}
+    async def join(self, address: str) -> Json:
+        """Join the swarm through the member listening at `address`."""
+        peer = online(self.peer)
+        members = await peer.join(check_address(address))
+        return {
+            "joined": address,
+            "members": [{"id": m.id, "address": m.address, "name": m.name} for m in members],
+        }
+
+    async def participate(self, chunk: str) -> Json:
+        """Replicate a chunk here, with its history, from any holder."""
+        peer = online(self.peer)
+        try:
+            chunk_id = ChunkId(resolve_id(peer, "chunk", chunk))
+        except UsageError as exc:
+            raise UsageError(
+                f"{exc}; a chunk this peer does not hold needs its full 32-digit id "
+                "(`mapctl chunk list` on a peer that holds it)"
+            ) from None
+
+        def report(received: int, parts: int) -> None:
+            self._progress[chunk] = (received, parts)
+
+        self._progress[chunk] = (0, 0)
+        try:
+            table = await peer.participate(chunk_id, report, again=True)
+        finally:
+            self._progress.pop(chunk, None)
+        items = next((c.items for c in peer.chunks() if c.id == chunk_id), 0)
+        return {
+            "chunk": chunk_id,
+            "table": table,
+            "items": items,
+            "holders": peer.holders(chunk_id),
+        }
+
+    async def participate_progress(self, chunk: str) -> Json:
+        """How far a running `participate(chunk)` got: parts received of all parts
+        (0 of 0 before the first part, or when none runs)."""
+        received, parts = self._progress.get(chunk, (0, 0))
+        return {"chunk": chunk, "received": received, "parts": parts}
+
+    async def chunk_leave(self, chunk: str, force: bool = False) -> Json:
+        """Stop replicating a chunk (the last holder needs `force`)."""
+        peer = online(self.peer)
+        chunk_id = ChunkId(resolve_id(peer, "chunk", chunk))
+        peer.chunk_table(chunk_id)  # NotParticipatingError if it is not held here
+        await peer.leave_chunk(chunk_id, force=force)
+        return {"chunk": chunk_id, "left": True}
+
+    async def swarm_chunks(self) -> Json:
+        """Every chunk a member of the swarm (this peer included) holds."""
+        from mapapi.service.control import ask_chunk_lists
+
+        peer = online(self.peer)
+        found: dict[str, Json] = {
+            c.id: {"id": c.id, "table": c.table, "holders": [peer.id]} for c in peer.chunks()
+        }
+        for member, chunks in (await ask_chunk_lists(peer)).items():
+            for c in chunks:
+                entry = found.setdefault(c.chunk, {"id": c.chunk, "table": c.table, "holders": []})
+                entry["holders"].append(member)
+        return {"chunks": [found[k] for k in sorted(found)]}
 
     async def query_bbox(self, bbox: list[float], table: str | None = None) -> Json:
         """The chunks (and the missions they hold) whose box overlaps `bbox`
@@ -63,52 +182,10 @@ class TransferOperations:
         box = BBox.from_tuple(bbox)
         return {"results": [placed_json(f) for f in await self.peer.query_bbox(box, table)]}
 
-    async def load_bbox(self, bbox: list[float], table: str | None = None) -> Json:
-        """Participate in every chunk in `bbox` (of `table`) not held here, and in
-        the other chunks of the missions found; the query's results afterwards
-        (every chunk now held) and `loaded`: each chunk fetched, in order.
-
-        Raises:
-            PeerNotRunning: a chunk must be fetched but the peer is off the network.
-        """
-        from mapapi.maps.stored import mission_chunks
-
-        key = _key(bbox, table)
-        found = (await self.query_bbox(bbox, table))["results"]
-        todo = [ChunkId(r["chunk"]) for r in found if not r["held"]]
-        loaded: list[Json] = []
-        self._loads[key] = (0, len(todo))
-        try:
-            loaded += [await self._load(key, chunk, todo) for chunk in todo]
-            names = {name for r in found for name in r["missions"]}
-            held = {c.id for c in self.peer.chunks()}
-            parts = await mission_chunks(self.peer, names)
-            more = sorted({c for tables in parts.values() for c in tables.values()} - held)
-            todo += more
-            loaded += [await self._load(key, chunk, todo) for chunk in more]
-        finally:
-            self._loads.pop(key, None)
-        results = (await self.query_bbox(bbox, table))["results"] if loaded else found
-        return {"results": results, "loaded": loaded}
-
-    async def _load(self, key: str, chunk: ChunkId, todo: list[ChunkId]) -> Json:
-        peer = self._on_swarm()
-        table = await peer.participate(chunk)
-        self._loads[key] = (todo.index(chunk) + 1, len(todo))
-        items = next((c.items for c in peer.chunks() if c.id == chunk), 0)
-        return {"chunk": chunk, "table": table, "items": items}
-
-    async def load_progress(self, bbox: list[float], table: str | None = None) -> Json:
-        """How far a running `load_bbox(bbox, table)` got: chunks loaded of the
-        chunks known to load so far (0 of 0 before the query answers, or when
-        none runs)."""
-        done, total = self._loads.get(_key(bbox, table), (0, 0))
-        return {"loaded": done, "of": total}
-
     async def traffic(self) -> Json:
         """What this peer's swarm transport moved since it started: messages and
         bytes sent and received (in total and by message type) and dropped."""
-        peer = self._on_swarm()
+        peer = online(self.peer)
         assert peer.swarm is not None
         stats = peer.swarm.rpc.transport.stats
 

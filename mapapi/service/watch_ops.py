@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from mapapi.core.errors import UsageError
 from mapapi.core.table import TableDescriptor
 from mapapi.lookup.spatial import BBox
+from mapapi.service.ops import Operation
+from mapapi.service.transfer_ops import online
 from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec, parse_where
 
 if TYPE_CHECKING:
@@ -32,15 +35,19 @@ _MAX_WAIT_S = 30.0  # one long poll; the command polls again
 
 
 class WatchOperations:
-    """`watch_*` operations over `self.peer` (mixed into `mapapi.service.ops.Operations`)."""
+    """The `watch_*` operations over one peer; a set of `mapapi.service.ops.Operations`."""
 
-    peer: Peer
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+        self._watches: dict[str, tuple[Subscription, float]] = {}  # id -> (it, last poll)
 
-    def _on_swarm(self) -> Peer:
-        """The peer, which must be on the network (Operations refines the error)."""
-        raise NotImplementedError
-
-    _watches: dict[str, tuple[Subscription, float]]  # watch id -> (subscription, last poll)
+    def operations(self) -> Mapping[str, Operation]:
+        """See `mapapi.service.ops.OperationSet`."""
+        return {
+            "watch_start": self.watch_start,
+            "watch_next": self.watch_next,
+            "watch_stop": self.watch_stop,
+        }
 
     async def watch_start(
         self,
@@ -50,7 +57,7 @@ class WatchOperations:
     ) -> Json:
         """Subscribe to changes in `bbox` (default: the whole index), of `table`,
         whose fields match every ``FIELD=VALUE`` of `where`."""
-        peer = self._on_swarm()
+        peer = online(self.peer)
         await self._sweep()
         region = peer.grid.bounds if bbox is None else BBox.from_tuple(bbox)
         if peer.grid.clamp(region) is None:

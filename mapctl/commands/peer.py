@@ -12,7 +12,7 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 if TYPE_CHECKING:
-    from mapapi.service.repo import PeerRecord, Repository
+    from mapapi import PeerRecord, Repository
 
 
 _LISTEN_HELP = (
@@ -22,7 +22,7 @@ _LISTEN_HELP = (
 
 
 def _repo(session: Session) -> Repository:
-    from mapapi.service.repo import Repository
+    from mapapi import Repository
 
     return Repository.find(session.path)
 
@@ -70,16 +70,14 @@ def peer_start(
     With --json print {"id", "address", "join"}. In the foreground it serves until
     Ctrl-C (or `mapctl peer stop`); with --detach it returns once the peer serves.
     """
-    from mapapi.service import daemon
-    from mapapi.service.ops import check_address
+    from mapapi import check_address, run_daemon, start_daemon
     from mapctl import render
 
     repo = _repo(session)
     for address in (listen, *joins, *([advertise] if advertise else [])):
         check_address(address)
     if detach:
-        argv = daemon.daemon_command(repo, listen, joins, advertise, session.verbose)
-        record = daemon.spawn_detached(repo, argv)
+        record = start_daemon(repo, listen, joins, advertise=advertise, verbose=session.verbose)
         _announce(record, as_json)
         render.note(
             f"peer {record.name} runs in the background (pid {record.pid}); "
@@ -96,7 +94,7 @@ def peer_start(
         if not as_json:
             render.note(f"peer {record.name} serves (pid {record.pid}); Ctrl-C stops it")
 
-    daemon.run(repo, listen, joins, advertise=advertise, ready=ready)
+    run_daemon(repo, listen, joins, advertise=advertise, ready=ready)
 
 
 @peer.command("stop")
@@ -104,12 +102,12 @@ def peer_start(
 @pass_session
 def peer_stop(session: Session, as_json: bool) -> None:
     """Stop the running peer gracefully (it says goodbye to the swarm)."""
-    from mapapi.service import daemon
+    from mapapi import stop_daemon
     from mapctl import render
 
     repo = _repo(session)
     stale = repo.stale_peer_record()
-    record = daemon.stop_daemon(repo)
+    record = stop_daemon(repo)
     if as_json:
         render.emit_json(
             {
@@ -249,35 +247,6 @@ def _chunk_choice(values: tuple[str, ...]) -> list[str] | None:
     return [] if specs == ["none"] else specs
 
 
-def _clone_target(directory: Path, address: str, name: str | None) -> tuple[Repository, bool]:
-    """The repository to clone into, and whether it was made now.
-
-    Raises:
-        UsageError: DIR is a repository with data, or ADDR is a secure swarm and DIR
-            is no repository yet (the swarm cannot trust a key made on the spot).
-    """
-    from mapapi import Repository, UsageError
-    from mapapi.net.security import split_address
-
-    if (directory / ".mapapi" / "config.toml").is_file():
-        repo = Repository.find(directory)
-        if name or not repo.is_empty():
-            raise UsageError(
-                f"{repo.root} is a repository already; clone into a new folder, or into one "
-                "that `mapctl init` just made (no --name then)"
-            )
-        return repo, False
-    endpoint, key = split_address(address)
-    if key is not None:
-        raise UsageError(
-            f"{endpoint} is a secure swarm: its peers must trust the new peer's key before "
-            f"it joins. Run `mapctl init {directory} --secure`, have every peer of the swarm "
-            f"`mapctl trust add` the key it prints, trust theirs (`mapctl -C {directory} "
-            f"trust add KEY`), then run this clone again"
-        )
-    return Repository.init(directory, name), True
-
-
 @click.command("clone")
 @click.argument("address", metavar="ADDR")
 @click.argument("directory", metavar="DIR", type=click.Path(file_okay=False, path_type=Path))
@@ -306,56 +275,23 @@ def clone(
     DIR may also be a repository `mapctl init` just made (still empty): that is how
     a secure swarm is cloned, since the swarm must trust the new peer's key first.
     """
-    from mapapi import MapError
-    from mapapi.service import daemon
-    from mapapi.service.ops import check_address
+    from mapapi import clone as clone_into
     from mapctl import render
 
-    check_address(address)
-    check_address(listen)
     wanted = _chunk_choice(chunks)
-    existed = directory.exists()
-    repo, made = _clone_target(directory, address, name)
-    try:
-        argv = daemon.daemon_command(repo, listen, (address,), None, session.verbose)
-        record = daemon.spawn_detached(repo, argv)
-    except BaseException:
-        import shutil
-
-        # nothing but an empty repository was made: leave no half-made clone behind
-        if made:
-            shutil.rmtree(repo.root if not existed else repo.meta_dir, ignore_errors=True)
-        raise
-    sub = Session(repo.root, session.view, session.verbose)
-    try:
-        if wanted is None:
-            wanted = [c["id"] for c in sub.call("swarm_chunks")["chunks"]]
-        done = [participate_with_progress(sub, chunk_id) for chunk_id in wanted]
-    except MapError:
-        render.note(
-            f"the peer of {repo.root} keeps running; retry with `mapctl -C {repo.root} chunk "
-            "participate ID`, or stop it with `mapctl peer stop`"
+    with render.chunk_transfers() as show:
+        cloned = session.run(
+            clone_into(
+                address,
+                directory,
+                chunks=wanted,
+                listen=listen,
+                name=name,
+                verbose=session.verbose,
+                progress=show,
+            )
         )
-        raise
-    finally:
-        sub.close()
-    if as_json:
-        render.emit_json(
-            {
-                "path": str(repo.root),
-                "id": record.id,
-                "address": record.address,
-                "join": record.join,
-                "chunks": done,
-            }
-        )
-    else:
-        items = sum(c["items"] for c in done)
-        render.line(
-            f"cloned {address} into {repo.root}: peer {record.name} at {record.address}, "
-            f"{len(done)} chunk(s), {items} item(s)",
-            "green",
-        )
+    render.cloned(address, cloned.to_json(), cloned.record.name, as_json=as_json)
 
 
 def register(cli: click.Group) -> None:

@@ -62,14 +62,12 @@ def init(
     A repository whose config.toml is lost but whose store holds a map is
     refused; `--recover` rebuilds its config from the store.
     """
-    from mapapi import Repository
-    from mapapi.core.errors import AlreadyInitialisedError
-    from mapapi.lookup.spatial import DEFAULT_BOUNDS, DEFAULT_CELLS, BBox, SpatialGrid
-    from mapapi.net.security import key_text
+    from mapapi import AlreadyInitialisedError, BBox, Repository, SpatialGrid, key_text
     from mapctl import render
 
+    default = SpatialGrid()
     grid = SpatialGrid(
-        BBox.from_tuple(bounds) if bounds else DEFAULT_BOUNDS, cells or DEFAULT_CELLS
+        BBox.from_tuple(bounds) if bounds else default.bounds, cells or default.cells
     )
     if peer_id and not recover:
         raise click.UsageError("--peer-id goes with --recover")

@@ -13,12 +13,11 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 if TYPE_CHECKING:
-    from mapapi.net.security import Security
+    from mapapi import Security
 
 
 def _security(session: Session) -> Security:
-    from mapapi.core.errors import UsageError
-    from mapapi.service.repo import Repository
+    from mapapi import Repository, UsageError
 
     repo = Repository.find(session.path)
     security = repo.security()
@@ -40,7 +39,7 @@ def key() -> None:
 @pass_session
 def key_show(session: Session, as_json: bool) -> None:
     """Print this peer's public key: what other peers pass to `trust add`."""
-    from mapapi.net.security import key_text
+    from mapapi import key_text
     from mapctl import render
 
     public = key_text(_security(session).keys.public)
@@ -61,7 +60,7 @@ def trust() -> None:
 @pass_session
 def trust_add(session: Session, keys: tuple[str, ...], as_json: bool) -> None:
     """Trust each KEY (64 hex digits, as `mapctl key show` prints them)."""
-    from mapapi.net.security import key_text, parse_key
+    from mapapi import key_text, parse_key
     from mapctl import render
 
     security = _security(session)
@@ -79,7 +78,7 @@ def trust_add(session: Session, keys: tuple[str, ...], as_json: bool) -> None:
 @pass_session
 def trust_list(session: Session, as_json: bool) -> None:
     """List the trusted keys (this peer's own key is always trusted, and not listed)."""
-    from mapapi.net.security import key_text
+    from mapapi import key_text
     from mapctl import render
 
     keys = sorted(key_text(k) for k in _security(session).trust.current())
@@ -96,7 +95,7 @@ def trust_list(session: Session, as_json: bool) -> None:
 def trust_remove(session: Session, key_arg: str, as_json: bool) -> None:
     """Stop trusting KEY: its new connections are refused (restart the peer to
     also cut the ones open now)."""
-    from mapapi.net.security import key_text, parse_key
+    from mapapi import key_text, parse_key
     from mapctl import render
 
     parsed = parse_key(key_arg)

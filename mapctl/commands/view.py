@@ -66,7 +66,7 @@ def view_list(session: Session, as_json: bool) -> None:
 @pass_session
 def status(session: Session, as_json: bool) -> None:
     """Show the view, its begin time, staged changes and conflicts."""
-    from mapapi.core.view import mapctl_in
+    from mapapi import mapctl_in
     from mapctl import render
 
     info = session.call("status", view=session.view)

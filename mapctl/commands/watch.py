@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import json
-import sys
 import time
-from typing import Any
 
 import click
 
@@ -53,7 +50,7 @@ def watch(
     Needs the running peer: it subscribes to the region in the swarm's spatial
     index, and committers push only the matching changes to it. Ctrl-C stops.
     """
-    from mapapi.core.errors import WatchTimeout
+    from mapapi import WatchTimeout
     from mapctl import render
 
     started = session.call(
@@ -64,7 +61,7 @@ def watch(
     deadline = None if timeout is None else time.monotonic() + timeout
     box = " ".join(f"{v:g}" for v in started["bbox"])
     render.note(f"watching {box}; Ctrl-C stops")  # on stderr: the subscription is active
-    show = _json_line if as_json else _Table().add
+    show = render.json_line if as_json else render.ChangeRows().add
     try:
         while count is None or seen < count:
             wait = POLL_S if deadline is None else min(POLL_S, deadline - time.monotonic())
@@ -80,39 +77,6 @@ def watch(
     if deadline is not None and (seen == 0 or (count is not None and seen < count)):
         wanted = f"{count} change(s)" if count is not None else "a change"
         raise WatchTimeout(f"{seen} change(s) arrived in {timeout:g} s, waited for {wanted}")
-
-
-def _json_line(change: dict[str, Any]) -> None:
-    sys.stdout.write(json.dumps(change) + "\n")
-    sys.stdout.flush()
-
-
-class _Table:
-    """Changes as rows printed as they come (a table that grows)."""
-
-    def __init__(self) -> None:
-        self.header_done = False
-
-    def add(self, change: dict[str, Any]) -> None:
-        from rich.table import Table
-
-        from mapctl.render import console
-
-        table = Table(show_header=not self.header_done, box=None, pad_edge=False)
-        for name, width in (("time", 6), ("commit", 8), ("kind", 8), ("table", 10), ("id", 8)):
-            table.add_column(name, width=width, no_wrap=True)
-        table.add_column("data", overflow="fold")
-        data = "-" if change["data"] is None else json.dumps(change["data"], sort_keys=True)
-        table.add_row(
-            str(change["time"]),
-            change["commit"][:8],
-            change["kind"],
-            change["table"],
-            change["id"][:8],
-            data,
-        )
-        console.print(table)
-        self.header_done = True
 
 
 def register(cli: click.Group) -> None:

@@ -21,6 +21,7 @@ import pytest
 from click.testing import CliRunner, Result
 
 from mapapi import Repository
+from mapapi.app import operations, peer_of
 from mapapi.service.daemon import serve
 from mapapi.service.repo import PeerRecord
 from mapctl.cli import cli, main
@@ -142,7 +143,13 @@ class InProcessDaemon:
     async def start(self) -> PeerRecord:
         ready: asyncio.Future[PeerRecord] = asyncio.get_running_loop().create_future()
         self.task = asyncio.create_task(
-            serve(Repository.find(self.repo), stop=self.stop, ready=ready.set_result)
+            serve(
+                Repository.find(self.repo),
+                open_peer=peer_of,
+                operations=operations,
+                stop=self.stop,
+                ready=ready.set_result,
+            )
         )
         waiting: list[asyncio.Future[Any]] = [ready, self.task]
         done, _ = await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)

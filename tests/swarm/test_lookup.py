@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from mapapi import ChunkId, Peer
 from mapapi.lookup.dht.ring import chunk_key
-from mapapi.service.ops import Operations
+from mapapi.service.ops import RepoOperations
+from mapapi.service.transfer_ops import SwarmOperations
 from mapapi.swarm.replication import decode_holder
 
 from .conftest import TABLE, MakePeer, counter_chunk, lookup_swarm, net, value
@@ -59,7 +60,7 @@ async def test_a_peer_finds_holders_through_the_index_and_participates_by_id(
     assert {str(m.id) for m in found.holders} == {str(holder.id), str(sharer.id)}
 
     # `mapctl chunk participate ID` on any peer: the full id alone is enough
-    joined = await Operations(reader).participate(str(chunk))
+    joined = await SwarmOperations(reader).participate(str(chunk))
     assert joined["table"] == TABLE
     assert set(joined["holders"]) == {holder.id, sharer.id, reader.id}
     assert await value(reader, item) == 41
@@ -107,5 +108,5 @@ async def test_chunk_list_by_peer(make_peer: MakePeer) -> None:
 
     # a peer that is not on the network asks over a connection of its own
     offline = await make_peer()
-    rows = (await Operations(offline).chunk_list(table=TABLE, peer=a.address))["chunks"]
+    rows = (await RepoOperations(offline).chunk_list(table=TABLE, peer=a.address))["chunks"]
     assert sorted(r["id"] for r in rows) == sorted([first, second])

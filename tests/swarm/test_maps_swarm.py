@@ -23,7 +23,8 @@ from mapapi.maps import (
     read_g2o,
 )
 from mapapi.maps.cloud_file import read_cloud
-from mapapi.service.ops import Operations
+from mapapi.maps.operations import MapOperations
+from mapapi.service.transfer_ops import SwarmOperations
 
 from .conftest import MakePeer, lookup_swarm
 
@@ -90,8 +91,8 @@ async def test_missions_with_swarm_lists_what_others_hold(make_peer: MakePeer) -
     await import_graph(a, read_g2o(INTEL))
     await import_cloud(b, read_cloud(ROOM, voxel=0.5))
 
-    here = await Operations(b).missions()
-    everywhere = await Operations(b).missions(swarm=True)
+    here = await MapOperations(b).missions()
+    everywhere = await MapOperations(b).missions(swarm=True)
 
     assert [m["name"] for m in here["missions"]] == ["room_scan1"]
     intel, room = everywhere["missions"]
@@ -103,7 +104,7 @@ async def test_missions_with_swarm_lists_what_others_hold(make_peer: MakePeer) -
 async def test_load_bbox_loads_every_chunk_of_the_missions_found(make_peer: MakePeer) -> None:
     a, b = await lookup_swarm(make_peer, 2)
     result = await import_graph(a, read_g2o(INTEL), robot="hahnel")
-    ops = Operations(b)
+    ops = MapOperations(b)
 
     loaded = await ops.load_bbox([10, -20, -1, 11, -19, 1])
 
@@ -122,11 +123,11 @@ async def test_load_bbox_loads_every_chunk_of_the_missions_found(make_peer: Make
 async def test_traffic_counts_what_the_transport_moved(make_peer: MakePeer) -> None:
     a, b = await lookup_swarm(make_peer, 2)
     await import_graph(a, read_g2o(INTEL))
-    before = await Operations(b).traffic()
+    before = await SwarmOperations(b).traffic()
 
-    await Operations(b).load_bbox([-100, -100, -1, 100, 100, 1])
+    await MapOperations(b).load_bbox([-100, -100, -1, 100, 100, 1])
 
-    after = await Operations(b).traffic()
+    after = await SwarmOperations(b).traffic()
     received = after["received"]["bytes"] - before["received"]["bytes"]
     assert received > 2_512 * 21 * 8  # at least the edges' information matrices
     assert sum(after["received_by_type"].values()) == after["received"]["bytes"]
@@ -139,12 +140,12 @@ async def test_a_mission_exports_the_same_bytes_on_another_peer(
     """Issue 15: the same mission gives the same bytes on any peer, in the
     order and number formatting of the file it was imported from."""
     a, b = await lookup_swarm(make_peer, 2)
-    await Operations(a).import_map(str(INTEL))
-    loaded = await Operations(b).load_bbox([-100, -100, -10, 100, 100, 10])
+    await MapOperations(a).import_map(str(INTEL))
+    loaded = await MapOperations(b).load_bbox([-100, -100, -10, 100, 100, 10])
     assert loaded["loaded"]
 
-    await Operations(a).export_map("intel", str(tmp_path / "a.g2o"))
-    await Operations(b).export_map("intel", str(tmp_path / "b.g2o"))
+    await MapOperations(a).export_map("intel", str(tmp_path / "a.g2o"))
+    await MapOperations(b).export_map("intel", str(tmp_path / "b.g2o"))
 
     assert (tmp_path / "b.g2o").read_bytes() == (tmp_path / "a.g2o").read_bytes()
     assert (tmp_path / "b.g2o").read_bytes() == INTEL.read_bytes()

@@ -7,8 +7,8 @@ from collections.abc import Awaitable, Callable
 import pytest
 
 from mapapi import Peer
+from mapapi.app import operations
 from mapapi.net import LinkShape, Shaper
-from mapapi.service.ops import Operations
 from mapapi.swarm import replication
 
 from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, increment, net, value
@@ -35,7 +35,7 @@ class TestChunkInParts:
     async def test_progress_op_reports_nothing_when_idle(self, swarm: MakeSwarm) -> None:
         a, b = await swarm(2)
         chunk, _ = await counter_chunk(a)
-        ops = Operations(b)
+        ops = operations(b)
         assert (await ops.call("participate", {"chunk": chunk}))["items"] == 1
         idle = await ops.call("participate_progress", {"chunk": chunk})
         assert (idle["received"], idle["parts"]) == (0, 0)

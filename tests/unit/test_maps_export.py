@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from mapapi import Peer
+from mapapi.app import memory_peer, operations
 from mapapi.core.errors import UsageError
 from mapapi.maps import (
     EdgeKind,
@@ -27,9 +28,9 @@ from mapapi.maps import (
     read_kimera,
     write_g2o,
 )
+from mapapi.maps.operations import MapOperations
 from mapapi.maps.se3 import Pose
 from mapapi.maps.source import detect_format, read_source
-from mapapi.service.ops import OPERATIONS, Operations
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
@@ -82,13 +83,13 @@ def by_index(graph: MissionGraph) -> MissionGraph:
 
 
 @pytest.fixture
-def ops() -> Operations:
-    return Operations(Peer.in_memory())
+def ops() -> MapOperations:
+    return MapOperations(memory_peer())
 
 
 class TestG2oRoundTrip:
     async def test_intel_exports_as_2d_and_reads_back_equal_to_rounding(
-        self, ops: Operations, tmp_path: Path
+        self, ops: MapOperations, tmp_path: Path
     ) -> None:
         await ops.import_map(str(INTEL))
         out = tmp_path / "intel.g2o"
@@ -106,7 +107,9 @@ class TestG2oRoundTrip:
         assert out.read_text().startswith("VERTEX_SE2 0 ")
         same_graph(by_index(read_g2o(INTEL)), by_index(read_g2o(out)), tol=1e-12)
 
-    async def test_a_3d_graph_comes_back_bit_for_bit(self, ops: Operations, tmp_path: Path) -> None:
+    async def test_a_3d_graph_comes_back_bit_for_bit(
+        self, ops: MapOperations, tmp_path: Path
+    ) -> None:
         await ops.import_map(str(GARAGE))
         await ops.export_map("parking-garage", str(tmp_path / "garage.g2o"))
         await ops.import_map(str(tmp_path / "garage.g2o"), mission="again")
@@ -120,7 +123,7 @@ class TestG2oRoundTrip:
         ) == (sorted((e.source[1], e.target[1], e.relative, e.information) for e in first.edges))
 
     async def test_a_held_out_synthetic_graph_survives_import_export_import(
-        self, ops: Operations, tmp_path: Path
+        self, ops: MapOperations, tmp_path: Path
     ) -> None:
         graph = synthetic_graph(seed=20_240_611)
         source = tmp_path / "held-out.g2o"
@@ -137,7 +140,7 @@ class TestG2oRoundTrip:
         same_graph(by_index(graph), by_index(back))
 
     async def test_inter_robot_edges_are_left_out_of_a_one_mission_file(
-        self, ops: Operations, tmp_path: Path
+        self, ops: MapOperations, tmp_path: Path
     ) -> None:
         await ops.import_map(str(TUNNELS))
         robot2 = next(g for g in read_kimera(TUNNELS) if g.name == "robot2")
@@ -149,7 +152,7 @@ class TestG2oRoundTrip:
         assert (info["edges"], info["left_out"]) == (len(robot2.edges) - inter, inter)
         assert len(read_g2o(tmp_path / "robot2.g2o").edges) == info["edges"]
 
-    async def test_export_errors_say_what_to_do(self, ops: Operations, tmp_path: Path) -> None:
+    async def test_export_errors_say_what_to_do(self, ops: MapOperations, tmp_path: Path) -> None:
         await ops.import_map(str(INTEL))
         with pytest.raises(MapImportError, match=r"no mission 'nope'.*mapctl missions"):
             await ops.export_map("nope", str(tmp_path / "x.g2o"))
@@ -184,7 +187,9 @@ class TestNothingOfASetHalfImported:
             await import_missions(peer, [read_g2o(INTEL), read_g2o(INTEL)])
         assert peer.log() == []
 
-    async def test_a_malformed_file_commits_nothing(self, ops: Operations, tmp_path: Path) -> None:
+    async def test_a_malformed_file_commits_nothing(
+        self, ops: MapOperations, tmp_path: Path
+    ) -> None:
         lines = INTEL.read_text().splitlines(keepends=True)
         lines[3000] = "EDGE_SE2 1 2 3\n"
         broken = tmp_path / "broken.g2o"
@@ -229,7 +234,7 @@ class TestSources:
         with pytest.raises(MapImportError, match=r"intel\.g2o:1: expected the header"):
             read_source(INTEL, "kimera-csv")
 
-    async def test_reading_and_staging_report_progress(self, ops: Operations) -> None:
+    async def test_reading_and_staging_report_progress(self, ops: MapOperations) -> None:
         read: list[tuple[int, int]] = []
         staged: list[tuple[int, int]] = []
         graphs = read_source(GARAGE, progress=lambda d, t: read.append((d, t)))
@@ -246,13 +251,13 @@ class TestSources:
         }
 
     def test_every_map_operation_is_an_operation(self) -> None:
-        assert {"import_map", "import_progress", "export_map", "missions", "plot_map"} <= (
-            OPERATIONS
+        assert {"import_map", "import_progress", "export_map", "missions", "plot_map"} <= set(
+            operations(memory_peer()).table
         )
 
     def test_commands_load_the_operations_without_numpy(self) -> None:
-        # every mapctl command imports mapapi.service.ops; numpy alone would add ~40 ms to each
-        code = "import sys, mapapi.service.ops; print({'numpy', 'open3d'} & set(sys.modules))"
+        # every mapctl command imports mapapi (the operations with it); numpy would add ~40 ms
+        code = "import sys, mapapi; print({'numpy', 'open3d'} & set(sys.modules))"
         ran = subprocess.run(
             [sys.executable, "-c", code], capture_output=True, text=True, check=True
         )

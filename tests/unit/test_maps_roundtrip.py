@@ -25,8 +25,8 @@ from mapapi import Peer
 from mapapi.maps import read_kimera
 from mapapi.maps.cloud_file import read_cloud
 from mapapi.maps.g2o import looks_planar, write_g2o
+from mapapi.maps.operations import MapOperations
 from mapapi.maps.source import detect_format
-from mapapi.service.ops import Operations
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 G2O_FILES = sorted(SAMPLES.rglob("*.g2o"))
@@ -51,9 +51,9 @@ def _bytes(path: Path) -> bytes:
 
 
 @pytest.fixture
-async def ops(make_peer) -> Operations:  # type: ignore[no-untyped-def]
+async def ops(make_peer) -> MapOperations:  # type: ignore[no-untyped-def]
     peer: Peer = await make_peer()
-    return Operations(peer)
+    return MapOperations(peer)
 
 
 def test_every_sample_map_is_covered() -> None:
@@ -71,7 +71,7 @@ def test_every_sample_map_is_covered() -> None:
 
 @pytest.mark.parametrize("source", G2O_FILES, ids=lambda p: p.name)
 async def test_a_g2o_file_exports_byte_for_byte(
-    ops: Operations, source: Path, tmp_path: Path
+    ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
     await ops.import_map(str(source))
     out = tmp_path / source.name
@@ -87,7 +87,7 @@ async def test_a_g2o_file_exports_byte_for_byte(
 
 
 async def test_comments_blank_and_fix_lines_give_the_normal_form(
-    ops: Operations, tmp_path: Path
+    ops: MapOperations, tmp_path: Path
 ) -> None:
     source = tmp_path / "commented.g2o"
     source.write_text(
@@ -99,7 +99,9 @@ async def test_comments_blank_and_fix_lines_give_the_normal_form(
     assert (tmp_path / "out.g2o").read_text() == g2o_normal_form(source.read_text())
 
 
-async def test_an_edited_record_is_written_from_its_values(ops: Operations, tmp_path: Path) -> None:
+async def test_an_edited_record_is_written_from_its_values(
+    ops: MapOperations, tmp_path: Path
+) -> None:
     """The original text is kept only while it still says what the record holds."""
     from mapapi.maps import VERTICES
     from mapapi.maps.schema import pose_to_pb
@@ -128,7 +130,7 @@ async def test_an_edited_record_is_written_from_its_values(ops: Operations, tmp_
 
 @pytest.mark.parametrize("folder", KIMERA_FOLDERS, ids=lambda p: p.name)
 async def test_a_kimera_folder_exports_as_the_g2o_of_its_graphs(
-    ops: Operations, folder: Path, tmp_path: Path
+    ops: MapOperations, folder: Path, tmp_path: Path
 ) -> None:
     assert detect_format(folder) == "kimera-csv"
     await ops.import_map(str(folder))
@@ -142,7 +144,7 @@ async def test_a_kimera_folder_exports_as_the_g2o_of_its_graphs(
 
 @pytest.mark.parametrize("source", CLOUD_FILES, ids=lambda p: p.name)
 async def test_a_cloud_exports_its_points_the_same_way_twice(
-    ops: Operations, source: Path, tmp_path: Path
+    ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
     await ops.import_map(str(source), voxel=0)
     first, second = tmp_path / f"a{source.suffix}", tmp_path / f"b{source.suffix}"
