@@ -113,6 +113,7 @@ class _Group:
     role: Role = Role.FOLLOWER
     leader: int = NONE
     progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
+    reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
 
 
 class RaftGroups:
@@ -154,6 +155,7 @@ class RaftGroups:
         self._groups: dict[ChunkId, _Group] = {}
         self._outbox: dict[int, list[RaftMessage]] = {}
         self._by_node: dict[int, PeerId] = {}
+        self._reads = 0  # ReadIndex contexts issued
         self.frames_sent = 0  # RaftBatch notifications ...
         self.messages_sent = 0  # ... and the Raft messages they carried
         self._ticker: asyncio.Task[None] | None = None
@@ -291,6 +293,41 @@ class RaftGroups:
             ) from None
         return group.node.config
 
+    async def catch_up(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
+        """Wait until this replica has applied everything the chunk's group had
+        committed when asked (ReadIndex, thesis §6.4), so a view begun now sees
+        every acknowledged commit; returns the applied index.
+
+        Raises:
+            NotChunkLeader: no leader is known (an election; retry).
+            RequestTimeout: the leader could not confirm within `timeout`.
+        """
+        group = self._group(chunk)
+        self._reads += 1
+        context = self.me.to_bytes() + self._reads.to_bytes(8, "big")
+        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        group.reads[context] = done
+        try:
+            group.node.read_index(context)
+        except NotLeader as exc:
+            group.reads.pop(context, None)
+            raise NotChunkLeader(chunk, self._peer(exc.leader)) from None
+        self._process(group)
+        self._flush()
+        try:
+            async with asyncio.timeout(timeout):
+                index = await done
+                while self.applied(chunk) < index:
+                    group.progress.clear()
+                    await group.progress.wait()
+        except TimeoutError:
+            raise RequestTimeout(
+                f"chunk {chunk.short}: its leader did not confirm a read within {timeout:g} s"
+            ) from None
+        finally:
+            group.reads.pop(context, None)
+        return index
+
     async def _await_entry(
         self,
         group: _Group,
@@ -364,6 +401,10 @@ class RaftGroups:
             for message in rd.messages:
                 self._outbox.setdefault(message.to, []).append(_to_wire(group.chunk, message))
             self._apply_committed(group, rd.committed_entries)
+            for read in rd.read_states:
+                waiting = group.reads.get(read.context)
+                if waiting is not None and not waiting.done():
+                    waiting.set_result(read.index)
             if (rd.role, rd.leader) != (group.role, group.leader):
                 group.role, group.leader = rd.role, rd.leader
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)

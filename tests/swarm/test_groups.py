@@ -362,3 +362,14 @@ async def test_a_conflict_reaches_a_follower_mergeable(world: World) -> None:
     merged = caught.value.merge()  # the transaction lives here: it merges here
     merged.stage(Change(Op.UPDATE, "counters", COUNTER, CHUNK, b"3"))
     assert await merged.commit("merged") is not None
+
+
+async def test_a_follower_catches_up_before_a_fresh_read(world: World) -> None:
+    nodes = await founded(world, [CHUNK])
+    leader = await leader_of(nodes, CHUNK)
+    follower = next(n for n in nodes if n is not leader)
+    await follower.wait(lambda: follower.groups.leader(CHUNK) == leader.id)
+    await propose_all(leader, CHUNK, [b"fresh"])
+    index = await follower.groups.catch_up(CHUNK)
+    assert follower.groups.applied(CHUNK) >= index
+    assert follower.applied[CHUNK] == [b"fresh"]  # no waiting on our side: catch_up did
