@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mapapi import app
 from mapapi.core.errors import ConflictError
 from mapapi.core.transaction import Transaction
 from mapapi.service.peer import Peer
@@ -91,9 +92,10 @@ class _BlockingConflict(ConflictError):
 
 
 def open_peer(path: str | Path = ".") -> Blocking:
-    """A blocking proxy of `Peer.open(path)`."""
+    """A blocking proxy of the application's peer of `path` (`mapapi.app.open_peer`:
+    with the map tables' rules, as `mapctl` opens it)."""
     runner = _LoopThread()
-    return Blocking(runner.call(Peer.open, path), runner)
+    return Blocking(runner.call(app.open_peer, path), runner)
 
 
 def wrap(peer: Peer) -> Blocking:
