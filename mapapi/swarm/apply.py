@@ -10,8 +10,9 @@ commit rules the application gave at construction (every holder runs the same
 application).
 
 The commit's time is the proposal's Lamport time, raised to one past the
-chunk's clock when a proposal from before a leader change arrives with an older
-time: revision times then grow in log order, which validation relies on.
+chunk's clock (including commits applied earlier in the same batch) when a
+proposal from before a leader change arrives with an older time: revision times
+then grow in log order, which validation relies on.
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ def apply_proposal(
         return Outcome(refusal=str(exc))
     if not accepted:
         return Outcome()
-    time = max(proposal.time, store.raft_time(chunk) + 1)
+    time = max(proposal.time, chunk_clock(store, chunk) + 1)
     record = CommitRecord(
         proposal.commit_id,
         time,
@@ -94,6 +95,15 @@ def apply_proposal(
     revisions = build_revisions(accepted, latest, time, proposal.author, record.id)
     store.apply_commit(record, revisions)
     return Outcome(record, tuple(revisions))
+
+
+def chunk_clock(store: Store, chunk: ChunkId) -> int:
+    """The newest commit time in the chunk's replica: its recorded clock, or a later
+    commit applied earlier in the same transaction (`RaftGroups` records the clock
+    once per batch of entries, after them all)."""
+    clock = store.raft_time(chunk)
+    written = store.changed_since(clock, chunk=chunk)
+    return max((r.update_time for r in written), default=clock)
 
 
 def applier(store: ReplicaStore, rules: Sequence[CommitRule] = ()) -> ApplyFn:
