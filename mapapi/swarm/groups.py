@@ -27,26 +27,23 @@ from functools import partial
 
 from mapapi.core.errors import MapError, PeerUnavailable, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
-from mapapi.net.messages import RaftBatch, RaftEntry, RaftMessage
+from mapapi.net.messages import RaftBatch, RaftMessage
 from mapapi.net.rpc import Request, Rpc
-from mapapi.store.base import LogRow, ReplicaStore
+from mapapi.store.base import ReplicaStore
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_types import (
     NONE,
     Config,
     Entry,
     EntryKind,
-    HardState,
-    Message,
-    MessageKind,
     NotLeader,
     PersistentState,
     ProposalRefused,
     RaftOptions,
     Ready,
     Role,
-    Snapshot,
 )
+from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of, to_wire
 from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
@@ -73,12 +70,6 @@ ApplyFn = Callable[[ChunkId, Entry], Applied]
 transaction)."""
 AddressFn = Callable[[PeerId], str]
 """Where a peer is reached now (the member list); raises `PeerUnavailable`."""
-
-
-def node_id(peer: PeerId) -> int:
-    """The peer's node id in every group: the top 63 bits of its id (never 0, the
-    core's "no node"; 63 bits so it fits SQLite's signed integers)."""
-    return (int.from_bytes(peer.to_bytes(), "big") >> 65) or 1
 
 
 class ProposalLost(MapError):
@@ -186,7 +177,9 @@ class RaftGroups:
             raise ValueError(f"chunk {chunk} already has a Raft group here")
         config = Config(frozenset(node_id(p) for p in voters))
         self._open(chunk, PersistentState.bootstrap(config), applied=1)
-        self.store.raft_save(chunk, hard=(1, NONE, 1), entries=_rows(_bootstrap_entries(config)))
+        self.store.raft_save(
+            chunk, hard=(1, NONE, 1), entries=rows(PersistentState.bootstrap(config).entries)
+        )
         self.store.raft_applied(chunk, 1)
         if config.voters == {node_id(self.me)}:
             self._groups[chunk].node.campaign()
@@ -199,12 +192,7 @@ class RaftGroups:
         kept = self.store.raft_load(chunk)
         if kept is None:
             return False
-        snapshot = Snapshot(
-            kept.snap_index, kept.snap_term, Config.decode(kept.snap_config or b";"), kept.snap_data
-        )
-        entries = tuple(Entry(e.term, e.index, EntryKind(e.kind), e.data) for e in kept.entries)
-        state = PersistentState(HardState(kept.term, kept.vote, kept.commit), snapshot, entries)
-        self._open(chunk, state, applied=kept.applied)
+        self._open(chunk, state_of(kept), applied=kept.applied)
         return True
 
     def join(self, chunk: ChunkId) -> None:
@@ -383,7 +371,7 @@ class RaftGroups:
                 log.warning("refused a raft message of node %d from %s", wire.sender, req.sender)
                 continue
             try:
-                message = _from_wire(wire)
+                message = from_wire(wire)
             except ValueError as exc:
                 log.warning("refused a malformed raft message from %s: %s", req.sender.short, exc)
                 continue
@@ -399,7 +387,7 @@ class RaftGroups:
             rd = group.node.ready()
             self._persist(group.chunk, rd)
             for message in rd.messages:
-                self._outbox.setdefault(message.to, []).append(_to_wire(group.chunk, message))
+                self._outbox.setdefault(message.to, []).append(to_wire(group.chunk, message))
             self._apply_committed(group, rd.committed_entries)
             for read in rd.read_states:
                 waiting = group.reads.get(read.context)
@@ -419,7 +407,7 @@ class RaftGroups:
         self.store.raft_save(
             chunk,
             hard=None if hs is None else (hs.term, hs.vote, hs.commit),
-            entries=_rows(rd.entries),
+            entries=rows(rd.entries),
             snapshot=None
             if snap is None
             else (snap.index, snap.term, snap.config.encode(), snap.data),
@@ -481,58 +469,3 @@ def _fail_all(group: _Group, error: Exception) -> None:
         if not done.done():
             done.set_exception(error)
     group.waiting.clear()
-
-
-def _bootstrap_entries(config: Config) -> tuple[Entry, ...]:
-    return PersistentState.bootstrap(config).entries
-
-
-def _rows(entries: Iterable[Entry]) -> list[LogRow]:
-    return [LogRow(e.index, e.term, e.kind.value, e.data) for e in entries]
-
-
-def _to_wire(chunk: ChunkId, m: Message) -> RaftMessage:
-    snap = m.snapshot
-    return RaftMessage(
-        chunk=chunk,
-        kind=m.kind.value,
-        sender=m.sender,
-        to=m.to,
-        term=m.term,
-        log_term=m.log_term,
-        index=m.index,
-        entries=tuple(RaftEntry(e.term, e.index, e.kind.value, e.data) for e in m.entries),
-        commit=m.commit,
-        reject=m.reject,
-        reject_hint=m.reject_hint,
-        has_snapshot=snap is not None,
-        snap_index=snap.index if snap else 0,
-        snap_term=snap.term if snap else 0,
-        snap_config=snap.config.encode() if snap else b"",
-        snap_data=snap.data if snap else b"",
-        context=m.context,
-    )
-
-
-def _from_wire(w: RaftMessage) -> Message:
-    """The core's message (ValueError for an unknown kind: the envelope decoder's
-    ProtocolError path has already bounded every field)."""
-    snapshot = (
-        Snapshot(w.snap_index, w.snap_term, Config.decode(w.snap_config), w.snap_data)
-        if w.has_snapshot
-        else None
-    )
-    return Message(
-        MessageKind(w.kind),
-        w.sender,
-        w.to,
-        w.term,
-        w.log_term,
-        w.index,
-        tuple(Entry(e.term, e.index, EntryKind(e.kind), e.data) for e in w.entries),
-        w.commit,
-        w.reject,
-        w.reject_hint,
-        snapshot,
-        w.context,
-    )
