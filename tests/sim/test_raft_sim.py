@@ -1,6 +1,8 @@
-"""Seeded simulations of a Raft group under faults (DESIGN §13); see `tests.sim.simulator`.
+"""Seeded simulations of a Raft group under faults (DESIGN §13); see `mapbench.sim`.
 
-A failing seed names the command that replays it alone: `SIM_SEED=<n> pytest tests/sim -k seed -s`.
+Two runs per seed: the pure core (`test_seed`) and the commit path, real stores and
+`apply_proposal` (`test_commit_seed`). A failing seed names the command that replays it alone:
+`SIM_SEED=<n> pytest tests/sim -k seed -s`; `mapctl bench sim --seeds N` runs more.
 """
 
 from __future__ import annotations
@@ -9,9 +11,10 @@ import os
 
 import pytest
 
-from tests.sim.simulator import TICK, Faults, Sim, Violation
+from mapbench.sim import TICK, Faults, Sim, Violation, replay_command
 
-SEEDS = 600  # about 13 s on one core; `SIM_SEEDS=5000 pytest tests/sim -k seed` runs more
+SEEDS = 400  # the pure core: about 9 s on one core; `SIM_SEEDS=5000 pytest tests/sim -k seed`
+COMMIT_SEEDS = 200  # the commit path: about 20 s on one core
 CALM = Faults(drop=0.0, duplicate=0.0, max_delay=5, defer_ready=0.0, fault_every=10**9)
 
 
@@ -23,24 +26,30 @@ def run_seed(seed: int, **kwargs: object) -> Sim:
     except Violation as err:
         trace = "\n".join(sim.trace[-15:])
         pytest.fail(
-            f"{err}\n{sim.summary()}\nlast faults:\n{trace}\n"
-            f"replay: SIM_SEED={seed} pytest tests/sim -k seed -s",
+            f"{err}\n{sim.summary()}\nlast faults:\n{trace}\nreplay: {replay_command(seed)}",
             pytrace=False,
         )
     return sim
 
 
-def _seeds() -> list[int]:
-    """The seeds to run: SIM_SEED alone (a replay), else the first SIM_SEEDS (or SEEDS)."""
+def _seeds(default: int) -> list[int]:
+    """The seeds to run: SIM_SEED alone (a replay), else the first SIM_SEEDS (or `default`)."""
     if "SIM_SEED" in os.environ:
         return [int(os.environ["SIM_SEED"])]
-    return list(range(int(os.environ.get("SIM_SEEDS", SEEDS))))
+    return list(range(int(os.environ.get("SIM_SEEDS", default))))
 
 
-@pytest.mark.parametrize("seed", _seeds())
+@pytest.mark.parametrize("seed", _seeds(SEEDS))
 def test_seed(seed: int) -> None:
     """Every invariant holds through this seed's faults, and the group recovers after them."""
     print(run_seed(seed).summary())  # shown with -s, e.g. when replaying one seed
+
+
+@pytest.mark.parametrize("seed", _seeds(COMMIT_SEEDS))
+def test_commit_seed(seed: int) -> None:
+    """The same, through the commit path: one history of commits on every store, every
+    acknowledged commit present, the counter and the bank add up."""
+    print(run_seed(seed, commits=True).summary())
 
 
 def test_same_seed_same_run() -> None:
