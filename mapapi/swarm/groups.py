@@ -22,7 +22,6 @@ import asyncio
 import logging
 import random
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from functools import partial
 
 from mapapi.core.errors import MapError, PeerUnavailable, RequestTimeout
@@ -30,6 +29,14 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import RaftBatch, RaftMessage
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.group_state import (
+    AddressFn,
+    Applied,
+    ApplyFn,
+    GroupState,
+    NotChunkLeader,
+    persist,
+)
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_types import (
     NONE,
@@ -40,7 +47,6 @@ from mapapi.swarm.raft_types import (
     PersistentState,
     ProposalRefused,
     RaftOptions,
-    Ready,
     Role,
 )
 from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of, to_wire
@@ -53,58 +59,6 @@ TICK_SECONDS = 0.05
 leader is replaced in 0.5-1 s, and heartbeats leave every 50 ms."""
 PROPOSE_TIMEOUT = 5.0
 """Seconds a proposal waits to be committed and applied."""
-
-
-@dataclass(frozen=True, slots=True)
-class Applied:
-    """What applying one entry did: the result its proposer receives, and the
-    newest commit time it brought to the chunk (0: none)."""
-
-    result: object = None
-    time: int = 0
-
-
-ApplyFn = Callable[[ChunkId, Entry], Applied]
-"""Applies one committed NORMAL entry of a chunk's log to the store (called inside
-`store.exclusive()`, with the applied index and time recorded in the same
-transaction)."""
-AddressFn = Callable[[PeerId], str]
-"""Where a peer is reached now (the member list); raises `PeerUnavailable`."""
-
-
-class ProposalLost(MapError):
-    """A proposal's log entry was overwritten by a new leader before it committed:
-    it did not take effect, and may be proposed again."""
-
-    retriable = True
-    code = 46
-    exit_code = 5
-
-
-class NotChunkLeader(MapError):
-    """A proposal reached a peer that does not lead the chunk's group."""
-
-    retriable = True
-    code = 47
-    exit_code = 5
-
-    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
-        self.chunk, self.leader = chunk, leader
-        where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
-        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}; retry there")
-
-
-@dataclass
-class _Group:
-    """One chunk's node and the proposals waiting for their entries to apply."""
-
-    chunk: ChunkId
-    node: RaftNode
-    waiting: dict[int, tuple[int, asyncio.Future[Applied]]] = field(default_factory=dict)
-    role: Role = Role.FOLLOWER
-    leader: int = NONE
-    progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
-    reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
 
 
 class RaftGroups:
@@ -143,7 +97,7 @@ class RaftGroups:
         self._options = options or RaftOptions()
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
-        self._groups: dict[ChunkId, _Group] = {}
+        self._groups: dict[ChunkId, GroupState] = {}
         self._outbox: dict[int, list[RaftMessage]] = {}
         self._by_node: dict[int, PeerId] = {}
         self._reads = 0  # ReadIndex contexts issued
@@ -164,7 +118,7 @@ class RaftGroups:
             await asyncio.gather(self._ticker, return_exceptions=True)
             self._ticker = None
         for group in self._groups.values():
-            _fail_all(group, PeerUnavailable("this peer is closing"))
+            group.fail_all(PeerUnavailable("this peer is closing"))
 
     def found(self, chunk: ChunkId, voters: Iterable[PeerId]) -> None:
         """Found the chunk's group with these voters (every founding member calls
@@ -209,7 +163,7 @@ class RaftGroups:
             self._options,
             applied=applied,
         )
-        self._groups[chunk] = _Group(chunk, node)
+        self._groups[chunk] = GroupState(chunk, node)
 
     # -- reading the groups ------------------------------------------------------------
     def leader(self, chunk: ChunkId) -> PeerId | None:
@@ -318,7 +272,7 @@ class RaftGroups:
 
     async def _await_entry(
         self,
-        group: _Group,
+        group: GroupState,
         start: Callable[[], tuple[int, int]],
         timeout: float,  # noqa: ASYNC109
     ) -> Applied:
@@ -342,7 +296,7 @@ class RaftGroups:
                 "(too few voters reachable)"
             ) from None
 
-    def _group(self, chunk: ChunkId) -> _Group:
+    def _group(self, chunk: ChunkId) -> GroupState:
         group = self._groups.get(chunk)
         if group is None:
             raise NotChunkLeader(chunk, None)
@@ -362,7 +316,7 @@ class RaftGroups:
         a message may arrive before `join` or after the chunk was dropped)."""
         batch: RaftBatch = req.body
         sender = node_id(req.sender)
-        touched: dict[ChunkId, _Group] = {}
+        touched: dict[ChunkId, GroupState] = {}
         for wire in batch.messages:
             group = self._groups.get(wire.chunk)
             if group is None or wire.to != node_id(self.me):
@@ -381,11 +335,11 @@ class RaftGroups:
             self._process(group)
         self._flush()
 
-    def _process(self, group: _Group) -> None:
+    def _process(self, group: GroupState) -> None:
         """Run the Ready loop of one group until it has nothing more to do."""
         while group.node.has_ready():
             rd = group.node.ready()
-            self._persist(group.chunk, rd)
+            persist(self.store, group.chunk, rd)
             for message in rd.messages:
                 self._outbox.setdefault(message.to, []).append(to_wire(group.chunk, message))
             self._apply_committed(group, rd.committed_entries)
@@ -399,21 +353,7 @@ class RaftGroups:
                 self._on_change()
             group.node.advance(rd)
 
-    def _persist(self, chunk: ChunkId, rd: Ready) -> None:
-        if rd.snapshot is None and not rd.entries and rd.hard_state is None:
-            return
-        hs = rd.hard_state
-        snap = rd.snapshot
-        self.store.raft_save(
-            chunk,
-            hard=None if hs is None else (hs.term, hs.vote, hs.commit),
-            entries=rows(rd.entries),
-            snapshot=None
-            if snap is None
-            else (snap.index, snap.term, snap.config.encode(), snap.data),
-        )
-
-    def _apply_committed(self, group: _Group, entries: tuple[Entry, ...]) -> None:
+    def _apply_committed(self, group: GroupState, entries: tuple[Entry, ...]) -> None:
         if not entries:
             return
         group.progress.set()
@@ -424,19 +364,7 @@ class RaftGroups:
                     results[entry.index] = self._apply(group.chunk, entry)
             time = max((r.time for r in results.values()), default=0)
             self.store.raft_applied(group.chunk, entries[-1].index, time)
-        for entry in entries:
-            waiting = group.waiting.pop(entry.index, None)
-            if waiting is None:
-                continue
-            term, done = waiting
-            if done.done():
-                continue
-            if term == entry.term:
-                done.set_result(results.get(entry.index, Applied()))
-            else:
-                done.set_exception(
-                    ProposalLost(f"chunk {group.chunk.short}: entry {entry.index} was replaced")
-                )
+        group.settle(entries, results)
 
     def _flush(self) -> None:
         """Send each peer its messages of every group, as one notification."""
@@ -462,10 +390,3 @@ class RaftGroups:
         if node not in self._by_node:
             self._by_node = {node_id(p): p for p in self._peers()}
         return self._by_node.get(node)
-
-
-def _fail_all(group: _Group, error: Exception) -> None:
-    for _, done in group.waiting.values():
-        if not done.done():
-            done.set_exception(error)
-    group.waiting.clear()

@@ -1,0 +1,108 @@
+"""One chunk's group as the multi-Raft shell keeps it (DESIGN §13): the node,
+what its proposers and readers wait for, and how a `Ready` is persisted.
+
+`RaftGroups` (swarm/groups.py) owns many of these and drives them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from mapapi.core.errors import MapError
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.store.base import ReplicaStore
+from mapapi.swarm.raft import RaftNode
+from mapapi.swarm.raft_types import NONE, Entry, Ready, Role
+from mapapi.swarm.raft_wire import rows
+
+
+@dataclass(frozen=True, slots=True)
+class Applied:
+    """What applying one entry did: the result its proposer receives, and the
+    newest commit time it brought to the chunk (0: none)."""
+
+    result: object = None
+    time: int = 0
+
+
+ApplyFn = Callable[[ChunkId, Entry], Applied]
+"""Applies one committed NORMAL entry of a chunk's log to the store (called inside
+`store.exclusive()`, with the applied index and time recorded in the same
+transaction)."""
+AddressFn = Callable[[PeerId], str]
+"""Where a peer is reached now (the member list); raises `PeerUnavailable`."""
+
+
+class ProposalLost(MapError):
+    """A proposal's log entry was overwritten by a new leader before it committed:
+    it did not take effect, and may be proposed again."""
+
+    retriable = True
+    code = 46
+    exit_code = 5
+
+
+class NotChunkLeader(MapError):
+    """A proposal reached a peer that does not lead the chunk's group."""
+
+    retriable = True
+    code = 47
+    exit_code = 5
+
+    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
+        self.chunk, self.leader = chunk, leader
+        where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
+        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}; retry there")
+
+
+@dataclass
+class GroupState:
+    """One chunk's node, and the proposals and reads waiting on it."""
+
+    chunk: ChunkId
+    node: RaftNode
+    waiting: dict[int, tuple[int, asyncio.Future[Applied]]] = field(default_factory=dict)
+    role: Role = Role.FOLLOWER
+    leader: int = NONE
+    progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
+    reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
+
+    def settle(self, entries: tuple[Entry, ...], results: dict[int, Applied]) -> None:
+        """Answer the proposals of these applied entries: with what applying did,
+        or `ProposalLost` where a new leader's entry took the index."""
+        for entry in entries:
+            waiting = self.waiting.pop(entry.index, None)
+            if waiting is None:
+                continue
+            term, done = waiting
+            if done.done():
+                continue
+            if term == entry.term:
+                done.set_result(results.get(entry.index, Applied()))
+            else:
+                done.set_exception(
+                    ProposalLost(f"chunk {self.chunk.short}: entry {entry.index} was replaced")
+                )
+
+    def fail_all(self, error: Exception) -> None:
+        """Fail every proposal still waiting (the peer is closing)."""
+        for _, done in self.waiting.values():
+            if not done.done():
+                done.set_exception(error)
+        self.waiting.clear()
+
+
+def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:
+    """Persist what `rd` asks (snapshot, entries, hard state) before its messages leave."""
+    if rd.snapshot is None and not rd.entries and rd.hard_state is None:
+        return
+    hs = rd.hard_state
+    snap = rd.snapshot
+    store.raft_save(
+        chunk,
+        hard=None if hs is None else (hs.term, hs.vote, hs.commit),
+        entries=rows(rd.entries),
+        snapshot=None if snap is None else (snap.index, snap.term, snap.config.encode(), snap.data),
+    )
