@@ -10,60 +10,19 @@ commit intact; only an OS crash or power loss may drop the last few commits.
 from __future__ import annotations
 
 import sqlite3
-import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from mapapi.core.errors import ChunkNotFound, CorruptRepoError, LockTimeout, UsageError
+from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store import raft_sql
+from mapapi.store import raft_sql, sqlite_replica, sqlite_rows, sqlite_schema
 from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord
-from mapapi.store.file_check import check_file, check_schema, storage_error
-
-FORMAT = "mapapi-store"
-SCHEMA_VERSION = 1
-BUSY_TIMEOUT_MS = 30_000
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS tables (name TEXT PRIMARY KEY, type_name TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS chunks (
-    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name));
-CREATE TABLE IF NOT EXISTS revisions (
-    item_id TEXT NOT NULL, update_time INTEGER NOT NULL, table_name TEXT NOT NULL,
-    chunk_id TEXT NOT NULL, data BLOB NOT NULL, insert_time INTEGER NOT NULL,
-    removed INTEGER NOT NULL, author TEXT NOT NULL, commit_id TEXT NOT NULL,
-    PRIMARY KEY (item_id, update_time)) WITHOUT ROWID;
-CREATE INDEX IF NOT EXISTS revisions_chunk ON revisions (chunk_id, item_id);
-CREATE INDEX IF NOT EXISTS revisions_table ON revisions (table_name, item_id);
-CREATE INDEX IF NOT EXISTS revisions_commit ON revisions (commit_id);
-CREATE INDEX IF NOT EXISTS revisions_time ON revisions (update_time);
-CREATE TABLE IF NOT EXISTS commits (
-    id TEXT PRIMARY KEY, time INTEGER NOT NULL, author TEXT NOT NULL,
-    message TEXT NOT NULL, chunks TEXT NOT NULL,
-    author_name TEXT NOT NULL DEFAULT '', view TEXT NOT NULL DEFAULT '');
-CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
-CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
-CREATE TABLE IF NOT EXISTS holders (
-    chunk_id TEXT NOT NULL REFERENCES chunks(id) ON DELETE CASCADE, peer_id TEXT NOT NULL,
-    PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
-"""
-
-# Columns added since format 1, with how to add them to an older store (its
-# records then name no author and no view: `log` falls back to other names).
-_ADDED_COLUMNS = {
-    "commits": (
-        ("author_name", "TEXT NOT NULL DEFAULT ''"),
-        ("view", "TEXT NOT NULL DEFAULT ''"),
-    ),
-}
-_COMMIT_COLUMNS = "id, time, author, message, chunks, author_name, view"
-
-_REV_COLUMNS = (
-    "item_id, table_name, chunk_id, data, insert_time, update_time, removed, author, commit_id"
-)
+from mapapi.store.file_check import check_file, storage_error
+from mapapi.store.sqlite_connection import Connections
+from mapapi.store.sqlite_rows import COMMIT_COLUMNS as _COMMIT_COLUMNS
+from mapapi.store.sqlite_rows import REV_COLUMNS as _REV_COLUMNS
 
 
 def _scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
@@ -94,11 +53,11 @@ class SqliteStore:
             raise CorruptRepoError(f"store file {self.path} is missing")
         if self.path.exists() and (not create or self.path.stat().st_size):
             check_file(self.path)
-        self._local = threading.local()
-        self._all: list[sqlite3.Connection] = []
-        self._all_lock = threading.Lock()
+        self._db = Connections(self.path)
+        self._con = self._db.con
+        self._write = self._db.write
         try:
-            self._setup(create)
+            sqlite_schema.setup(self._db, create)
         except CorruptRepoError:
             self.close()
             raise
@@ -110,108 +69,9 @@ class SqliteStore:
                 "or clone the repository again"
             ) from exc
 
-    def _setup(self, create: bool) -> None:
-        con = self._con()
-        if create and con.execute("SELECT 1 FROM sqlite_master").fetchone() is None:
-            # Only an empty database becomes a new store: never add our tables to
-            # another application's database (it fails the marker check below).
-            con.execute("PRAGMA journal_mode=WAL")
-            with self._write(con):
-                for statement in _SCHEMA.split(";"):
-                    if statement.strip():
-                        con.execute(statement)
-                con.execute(
-                    "INSERT OR IGNORE INTO meta VALUES "
-                    "('format', ?), ('version', ?), ('clock', '0')",
-                    (FORMAT, str(SCHEMA_VERSION)),
-                )
-        self._add_columns(con)
-        self._add_raft_tables(con)
-        check_schema(con, self.path, _SCHEMA + raft_sql.RAFT_SCHEMA, FORMAT, SCHEMA_VERSION)
-
-    def _add_raft_tables(self, con: sqlite3.Connection) -> None:
-        """Give a mapapi store written before Raft its group tables (no write
-        transaction when they are there: most opens are reads)."""
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if "raft_state" in tables or "meta" not in tables:
-            return
-        marker = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
-        if marker is None or marker[0] != FORMAT:
-            return  # not ours: check_schema refuses it untouched
-        with self._write(con):
-            for statement in raft_sql.RAFT_SCHEMA.split(";"):
-                if statement.strip():
-                    con.execute(statement)
-
-    def _add_columns(self, con: sqlite3.Connection) -> None:
-        """Bring a store written before `_ADDED_COLUMNS` up to date (idempotent).
-
-        Only a file marked as a mapapi store is touched; `check_schema` then
-        refuses anything else unchanged."""
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        if "meta" not in tables:
-            return
-        marker = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
-        if marker is None or marker[0] != FORMAT:
-            return
-        for table, columns in _ADDED_COLUMNS.items():
-            have = {row[1] for row in con.execute(f"PRAGMA table_info({table})")}
-            missing = [(n, t) for n, t in columns if have and n not in have]
-            if missing:
-                with self._write(con):
-                    for name, definition in missing:
-                        con.execute(f"ALTER TABLE {table} ADD COLUMN {name} {definition}")
-
-    def _con(self) -> sqlite3.Connection:
-        con: sqlite3.Connection | None = getattr(self._local, "con", None)
-        if con is None:
-            con = sqlite3.connect(
-                self.path, isolation_level=None, check_same_thread=False, timeout=30
-            )
-            con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
-            con.execute("PRAGMA synchronous=NORMAL")
-            con.execute("PRAGMA foreign_keys=ON")
-            self._local.con = con
-            self._local.depth = 0
-            with self._all_lock:
-                self._all.append(con)
-        return con
-
-    @contextmanager
-    def _write(self, con: sqlite3.Connection) -> Iterator[None]:
-        """One write transaction; nested uses join the outer one."""
-        if self._local.depth:
-            self._local.depth += 1
-            try:
-                yield
-            finally:
-                self._local.depth -= 1
-            return
-        try:
-            con.execute("BEGIN IMMEDIATE")
-        except sqlite3.OperationalError as exc:
-            locked = LockTimeout(f"repository {self.path} stayed locked: {exc}")
-            raise storage_error(self.path, exc) or locked from exc
-        self._local.depth = 1
-        try:
-            yield
-            con.execute("COMMIT")
-        except BaseException as exc:
-            if con.in_transaction:  # on a full disk SQLite may have rolled back already
-                con.execute("ROLLBACK")
-            if isinstance(exc, sqlite3.Error) and (honest := storage_error(self.path, exc)):
-                raise honest from exc
-            raise
-        finally:
-            self._local.depth = 0
-
     def close(self) -> None:
         """Close every connection opened by any thread."""
-        with self._all_lock:
-            for con in self._all:
-                con.close()
-            self._all.clear()
-        self._local = threading.local()
+        self._db.close()
 
     def clock(self) -> int:
         """The highest applied commit time."""
@@ -339,83 +199,13 @@ class SqliteStore:
         """Write the record and its revisions in one SQL transaction."""
         con = self._con()
         with self._write(con):
-            # Idempotent and additive: a commit that spans chunks reaches a holder
-            # as one batch per chunk, each applied on its own.
-            con.execute(
-                f"INSERT OR IGNORE INTO commits ({_COMMIT_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (
-                    record.id,
-                    record.time,
-                    record.author,
-                    record.message,
-                    ",".join(record.chunks),
-                    record.author_name,
-                    record.view,
-                ),
-            )
-            # In primary-key order: random ids inserted as they come touch pages all
-            # over the table's B-tree; sorted, a large commit writes in half the time.
-            con.executemany(
-                "INSERT OR IGNORE INTO revisions (item_id, update_time, table_name, chunk_id, "
-                "data, insert_time, removed, author, commit_id) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                sorted(
-                    (
-                        r.item_id,
-                        r.update_time,
-                        r.table,
-                        r.chunk_id,
-                        r.data,
-                        r.insert_time,
-                        int(r.removed),
-                        r.author,
-                        r.commit_id,
-                    )
-                    for r in revisions
-                ),
-            )
-            con.execute(
-                "UPDATE meta SET value = MAX(CAST(value AS INTEGER), ?) WHERE key = 'clock'",
-                (record.time,),
-            )
+            sqlite_rows.write_commit(con, record, revisions)
 
     def _revision(self, row: sqlite3.Row | tuple) -> Revision:
-        item_id, table, chunk, data, inserted, updated, removed, author, commit = row
-        try:
-            return Revision(
-                ItemId(item_id),
-                table,
-                ChunkId(chunk),
-                bytes(data),
-                inserted,
-                updated,
-                bool(removed),
-                PeerId(author),
-                CommitId(commit),
-            )
-        except (TypeError, ValueError) as exc:
-            raise self._damaged_row("revision", exc) from exc
-
-    def _damaged_row(self, what: str, exc: Exception) -> CorruptRepoError:
-        return CorruptRepoError(
-            f"a {what} in {self.path} is damaged: {exc}; restore the store from a backup "
-            "or clone the repository again"
-        )
+        return sqlite_rows.revision(self.path, row)
 
     def _record(self, row: tuple) -> CommitRecord:
-        cid, time, author, message, chunks, author_name, view = row
-        try:
-            return CommitRecord(
-                CommitId(cid),
-                time,
-                PeerId(author),
-                message,
-                tuple(ChunkId(c) for c in chunks.split(",") if c),
-                author_name,
-                view,
-            )
-        except (AttributeError, TypeError, ValueError) as exc:
-            raise self._damaged_row("commit record", exc) from exc
+        return sqlite_rows.record(self.path, row)
 
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
         """Newest first."""
@@ -481,45 +271,25 @@ class SqliteStore:
     # -- replication -------------------------------------------------------------
     def holders(self, chunk_id: ChunkId) -> list[PeerId]:
         """The peers that hold a chunk, in id order."""
-        rows = self._con().execute(
-            "SELECT peer_id FROM holders WHERE chunk_id = ? ORDER BY peer_id", (chunk_id,)
-        )
-        return [PeerId(r[0]) for r in rows]
+        return sqlite_replica.holders(self._con(), chunk_id)
 
     def holdings(self) -> dict[ChunkId, list[PeerId]]:
         """Every chunk's holders, in id order (chunks with a recorded holder set)."""
-        rows = self._con().execute("SELECT chunk_id, peer_id FROM holders ORDER BY 1, 2")
-        found: dict[ChunkId, list[PeerId]] = {}
-        for chunk, peer in rows:
-            found.setdefault(ChunkId(chunk), []).append(PeerId(peer))
-        return found
+        return sqlite_replica.holdings(self._con())
 
     def set_holders(self, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
         """Replace a chunk's holder set."""
         con = self._con()
         with self._write(con):
-            con.execute("DELETE FROM holders WHERE chunk_id = ?", (chunk_id,))
-            con.executemany(
-                "INSERT OR IGNORE INTO holders VALUES (?, ?)", [(chunk_id, p) for p in peers]
-            )
+            sqlite_replica.set_holders(con, chunk_id, peers)
 
     def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
         """Every revision of every item of a chunk (its full history)."""
-        rows = self._con().execute(
-            f"SELECT {_REV_COLUMNS} FROM revisions WHERE chunk_id = ? "
-            "ORDER BY item_id, update_time",
-            (chunk_id,),
-        )
-        return [self._revision(r) for r in rows]
+        return sqlite_replica.chunk_revisions(self.path, self._con(), chunk_id)
 
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """The records of every commit that wrote to a chunk, oldest first."""
-        rows = self._con().execute(
-            f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id IN "
-            "(SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?) ORDER BY time",
-            (chunk_id,),
-        )
-        return [self._record(r) for r in rows]
+        return sqlite_replica.chunk_commits(self.path, self._con(), chunk_id)
 
     def item_chunk(self, item_id: ItemId) -> ChunkId | None:
         """The chunk an item belongs to, if this store has it."""
@@ -551,32 +321,7 @@ class SqliteStore:
         """
         con = self._con()
         with self._write(con):
-            known = con.execute("SELECT type_name FROM tables WHERE name = ?", (table,)).fetchone()
-            if known is not None and known[0] != type_name:
-                raise UsageError(
-                    f"table {table!r} holds {known[0]} here but {type_name} in the swarm; "
-                    "rename one of them"
-                )
-            con.execute("INSERT OR IGNORE INTO tables VALUES (?, ?)", (table, type_name))
-            con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
-            had = [
-                CommitId(r[0])
-                for r in con.execute(
-                    "SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?", (chunk_id,)
-                )
-            ]
-            con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
-            by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
-            for revision in revisions:
-                by_commit.setdefault(revision.commit_id, []).append(revision)
-            for record in commits:
-                self.apply_commit(record, by_commit[record.id])
-            con.executemany(
-                "DELETE FROM commits WHERE id = ? AND NOT EXISTS "
-                "(SELECT 1 FROM revisions WHERE commit_id = ?)",
-                [(c, c) for c in had if c not in by_commit],
-            )
-            self.set_holders(chunk_id, holders)
+            sqlite_replica.install(con, chunk_id, table, type_name, revisions, commits, holders)
 
     def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
         """The persisted state of the chunk's Raft group, or None."""
@@ -615,5 +360,4 @@ class SqliteStore:
         """Forget a chunk's replica (this peer left it); commit records stay."""
         con = self._con()
         with self._write(con):
-            con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
-            con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))
+            sqlite_replica.drop(con, chunk_id)

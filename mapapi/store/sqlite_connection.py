@@ -1,0 +1,81 @@
+"""The connections of one SQLite store file: one per thread, and its write transaction.
+
+Several threads and several processes may open the same file. Each thread gets
+its own connection; committers serialise on SQLite's write lock
+(`BEGIN IMMEDIATE`), and nested write transactions join the outer one.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from mapapi.core.errors import LockTimeout
+from mapapi.store.file_check import storage_error
+
+BUSY_TIMEOUT_MS = 30_000
+
+
+class Connections:
+    """Every thread's connection to the store file at `path`."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._local = threading.local()
+        self._all: list[sqlite3.Connection] = []
+        self._all_lock = threading.Lock()
+
+    def con(self) -> sqlite3.Connection:
+        """This thread's connection (opened on first use)."""
+        con: sqlite3.Connection | None = getattr(self._local, "con", None)
+        if con is None:
+            con = sqlite3.connect(
+                self.path, isolation_level=None, check_same_thread=False, timeout=30
+            )
+            con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+            con.execute("PRAGMA synchronous=NORMAL")
+            con.execute("PRAGMA foreign_keys=ON")
+            self._local.con = con
+            self._local.depth = 0
+            with self._all_lock:
+                self._all.append(con)
+        return con
+
+    @contextmanager
+    def write(self, con: sqlite3.Connection) -> Iterator[None]:
+        """One write transaction; nested uses join the outer one."""
+        if self._local.depth:
+            self._local.depth += 1
+            try:
+                yield
+            finally:
+                self._local.depth -= 1
+            return
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:
+            locked = LockTimeout(f"repository {self.path} stayed locked: {exc}")
+            raise storage_error(self.path, exc) or locked from exc
+        self._local.depth = 1
+        try:
+            yield
+            con.execute("COMMIT")
+        except BaseException as exc:
+            if con.in_transaction:  # on a full disk SQLite may have rolled back already
+                con.execute("ROLLBACK")
+            if isinstance(exc, sqlite3.Error) and (honest := storage_error(self.path, exc)):
+                raise honest from exc
+            raise
+        finally:
+            self._local.depth = 0
+
+    def close(self) -> None:
+        """Close every connection opened by any thread."""
+        with self._all_lock:
+            for con in self._all:
+                con.close()
+            self._all.clear()
+        self._local = threading.local()

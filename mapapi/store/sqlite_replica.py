@@ -1,0 +1,108 @@
+"""A chunk's replica in the SQLite store as a whole: its holders, its full history
+going out to a new holder, and a replica coming in (install) or going (drop).
+
+Functions take a connection; those that write expect the caller's write
+transaction (`SqliteStore` opens it).
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Sequence
+from pathlib import Path
+
+from mapapi.core.errors import UsageError
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId, CommitId, PeerId
+from mapapi.store import sqlite_rows
+from mapapi.store.sqlite_rows import COMMIT_COLUMNS, REV_COLUMNS
+
+
+def holders(con: sqlite3.Connection, chunk_id: ChunkId) -> list[PeerId]:
+    """The peers that hold a chunk, in id order."""
+    rows = con.execute(
+        "SELECT peer_id FROM holders WHERE chunk_id = ? ORDER BY peer_id", (chunk_id,)
+    )
+    return [PeerId(r[0]) for r in rows]
+
+
+def holdings(con: sqlite3.Connection) -> dict[ChunkId, list[PeerId]]:
+    """Every chunk's holders, in id order (chunks with a recorded holder set)."""
+    rows = con.execute("SELECT chunk_id, peer_id FROM holders ORDER BY 1, 2")
+    found: dict[ChunkId, list[PeerId]] = {}
+    for chunk, peer in rows:
+        found.setdefault(ChunkId(chunk), []).append(PeerId(peer))
+    return found
+
+
+def set_holders(con: sqlite3.Connection, chunk_id: ChunkId, peers: Sequence[PeerId]) -> None:
+    """Replace a chunk's holder set."""
+    con.execute("DELETE FROM holders WHERE chunk_id = ?", (chunk_id,))
+    con.executemany("INSERT OR IGNORE INTO holders VALUES (?, ?)", [(chunk_id, p) for p in peers])
+
+
+def chunk_revisions(path: Path, con: sqlite3.Connection, chunk_id: ChunkId) -> list[Revision]:
+    """Every revision of every item of a chunk (its full history)."""
+    rows = con.execute(
+        f"SELECT {REV_COLUMNS} FROM revisions WHERE chunk_id = ? ORDER BY item_id, update_time",
+        (chunk_id,),
+    )
+    return [sqlite_rows.revision(path, r) for r in rows]
+
+
+def chunk_commits(path: Path, con: sqlite3.Connection, chunk_id: ChunkId) -> list[CommitRecord]:
+    """The records of every commit that wrote to a chunk, oldest first."""
+    rows = con.execute(
+        f"SELECT {COMMIT_COLUMNS} FROM commits WHERE id IN "
+        "(SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?) ORDER BY time",
+        (chunk_id,),
+    )
+    return [sqlite_rows.record(path, r) for r in rows]
+
+
+def install(
+    con: sqlite3.Connection,
+    chunk_id: ChunkId,
+    table: str,
+    type_name: str,
+    revisions: Sequence[Revision],
+    commits: Sequence[CommitRecord],
+    peers: Sequence[PeerId],
+) -> None:
+    """Take in a replica received from a holder (see `SqliteStore.install_chunk`).
+
+    Raises:
+        UsageError: this repository has a table of that name with another type.
+    """
+    known = con.execute("SELECT type_name FROM tables WHERE name = ?", (table,)).fetchone()
+    if known is not None and known[0] != type_name:
+        raise UsageError(
+            f"table {table!r} holds {known[0]} here but {type_name} in the swarm; "
+            "rename one of them"
+        )
+    con.execute("INSERT OR IGNORE INTO tables VALUES (?, ?)", (table, type_name))
+    con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+    had = [
+        CommitId(r[0])
+        for r in con.execute(
+            "SELECT DISTINCT commit_id FROM revisions WHERE chunk_id = ?", (chunk_id,)
+        )
+    ]
+    con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
+    by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
+    for revision in revisions:
+        by_commit.setdefault(revision.commit_id, []).append(revision)
+    for record in commits:
+        sqlite_rows.write_commit(con, record, by_commit[record.id])
+    con.executemany(
+        "DELETE FROM commits WHERE id = ? AND NOT EXISTS "
+        "(SELECT 1 FROM revisions WHERE commit_id = ?)",
+        [(c, c) for c in had if c not in by_commit],
+    )
+    set_holders(con, chunk_id, peers)
+
+
+def drop(con: sqlite3.Connection, chunk_id: ChunkId) -> None:
+    """Forget a chunk's replica (this peer left it); commit records stay."""
+    con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
+    con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))

@@ -1,0 +1,112 @@
+"""The SQLite store's schema: creating a new store, and bringing an older one up to date.
+
+Only an empty database becomes a new store, and only a file marked as a mapapi
+store is upgraded; `check_schema` then refuses anything else unchanged.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+
+from mapapi.store import raft_sql
+from mapapi.store.file_check import check_schema
+from mapapi.store.sqlite_connection import Connections
+
+FORMAT = "mapapi-store"
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS tables (name TEXT PRIMARY KEY, type_name TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS chunks (
+    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name));
+CREATE TABLE IF NOT EXISTS revisions (
+    item_id TEXT NOT NULL, update_time INTEGER NOT NULL, table_name TEXT NOT NULL,
+    chunk_id TEXT NOT NULL, data BLOB NOT NULL, insert_time INTEGER NOT NULL,
+    removed INTEGER NOT NULL, author TEXT NOT NULL, commit_id TEXT NOT NULL,
+    PRIMARY KEY (item_id, update_time)) WITHOUT ROWID;
+CREATE INDEX IF NOT EXISTS revisions_chunk ON revisions (chunk_id, item_id);
+CREATE INDEX IF NOT EXISTS revisions_table ON revisions (table_name, item_id);
+CREATE INDEX IF NOT EXISTS revisions_commit ON revisions (commit_id);
+CREATE INDEX IF NOT EXISTS revisions_time ON revisions (update_time);
+CREATE TABLE IF NOT EXISTS commits (
+    id TEXT PRIMARY KEY, time INTEGER NOT NULL, author TEXT NOT NULL,
+    message TEXT NOT NULL, chunks TEXT NOT NULL,
+    author_name TEXT NOT NULL DEFAULT '', view TEXT NOT NULL DEFAULT '');
+CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
+CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
+CREATE TABLE IF NOT EXISTS holders (
+    chunk_id TEXT NOT NULL REFERENCES chunks(id) ON DELETE CASCADE, peer_id TEXT NOT NULL,
+    PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
+"""
+
+# Columns added since format 1, with how to add them to an older store (its
+# records then name no author and no view: `log` falls back to other names).
+_ADDED_COLUMNS = {
+    "commits": (
+        ("author_name", "TEXT NOT NULL DEFAULT ''"),
+        ("view", "TEXT NOT NULL DEFAULT ''"),
+    ),
+}
+
+
+def setup(db: Connections, create: bool) -> None:
+    """Create the store's tables (with `create`, in an empty database), upgrade an
+    older store, and check the schema.
+
+    Raises:
+        CorruptRepoError: not a mapapi store, of a newer format, or lacking a table.
+    """
+    con = db.con()
+    if create and con.execute("SELECT 1 FROM sqlite_master").fetchone() is None:
+        # Only an empty database becomes a new store: never add our tables to
+        # another application's database (it fails the marker check below).
+        con.execute("PRAGMA journal_mode=WAL")
+        with db.write(con):
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    con.execute(statement)
+            con.execute(
+                "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('version', ?), ('clock', '0')",
+                (FORMAT, str(SCHEMA_VERSION)),
+            )
+    _add_columns(db, con)
+    _add_raft_tables(db, con)
+    check_schema(con, db.path, _SCHEMA + raft_sql.RAFT_SCHEMA, FORMAT, SCHEMA_VERSION)
+
+
+def _add_raft_tables(db: Connections, con: sqlite3.Connection) -> None:
+    """Give a mapapi store written before Raft its group tables (no write
+    transaction when they are there: most opens are reads)."""
+    tables = _tables_if_ours(con)
+    if tables is None or "raft_state" in tables:
+        return  # not ours (check_schema refuses it untouched), or up to date
+    with db.write(con):
+        for statement in raft_sql.RAFT_SCHEMA.split(";"):
+            if statement.strip():
+                con.execute(statement)
+
+
+def _add_columns(db: Connections, con: sqlite3.Connection) -> None:
+    """Bring a store written before `_ADDED_COLUMNS` up to date (idempotent).
+
+    Only a file marked as a mapapi store is touched; `check_schema` then
+    refuses anything else unchanged."""
+    if _tables_if_ours(con) is None:
+        return
+    for table, columns in _ADDED_COLUMNS.items():
+        have = {row[1] for row in con.execute(f"PRAGMA table_info({table})")}
+        missing = [(n, t) for n, t in columns if have and n not in have]
+        if missing:
+            with db.write(con):
+                for name, definition in missing:
+                    con.execute(f"ALTER TABLE {table} ADD COLUMN {name} {definition}")
+
+
+def _tables_if_ours(con: sqlite3.Connection) -> set[str] | None:
+    """The database's tables if it is marked as a mapapi store, else None."""
+    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    if "meta" not in tables:
+        return None
+    marker = con.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()
+    return tables if marker is not None and marker[0] == FORMAT else None
