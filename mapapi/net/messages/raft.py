@@ -1,0 +1,77 @@
+"""One Raft group per chunk (DESIGN §13): its messages, batched per peer, and
+proposals forwarded to the leader.
+
+Plain frozen dataclasses, each mapping field by field onto the message of the
+same name in `proto/mapapi/v1/wire.proto` (see `mapapi.net.messages`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mapapi.core.history import CommitRecord, Revision
+from mapapi.core.ids import ChunkId
+
+
+@dataclass(frozen=True, slots=True)
+class RaftEntry:
+    """A log entry on the wire (`kind`: `raft_types.EntryKind`'s value)."""
+
+    term: int
+    index: int
+    kind: int
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftMessage:
+    """One message of the chunk's group, between two node ids (see `swarm/groups.py`)."""
+
+    chunk: ChunkId
+    kind: int
+    sender: int
+    to: int
+    term: int
+    log_term: int
+    index: int
+    entries: tuple[RaftEntry, ...]
+    commit: int
+    reject: bool
+    reject_hint: int
+    has_snapshot: bool
+    snap_index: int
+    snap_term: int
+    snap_config: bytes
+    snap_data: bytes
+    context: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftBatch:
+    """All a peer has for another from every group they share, as one notification."""
+
+    messages: tuple[RaftMessage, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class RaftPropose:
+    """Ask the chunk's leader to propose an encoded `Proposal` and wait for it."""
+
+    chunk: ChunkId
+    proposal: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RaftProposed:
+    """The proposal applied at the leader: its commit (None: it wrote nothing)."""
+
+    record: CommitRecord | None
+    revisions: tuple[Revision, ...]
+
+
+BODIES: dict[str, type] = {
+    "raft_batch": RaftBatch,
+    "raft_propose": RaftPropose,
+    "raft_proposed": RaftProposed,
+}
+"""Envelope body field -> class, for the messages of this area."""
