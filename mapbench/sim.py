@@ -259,6 +259,7 @@ class Sim:
         dest = self.nodes.get(m.to)
         if dest is None or self.rng.random() < self.faults.drop:
             return
+        m = self.workload.wire(m)
         copies = 2 if self.rng.random() < self.faults.duplicate else 1
         for _ in range(copies):
             self.at(self.rng.randint(1, self.faults.max_delay), self._delivery(m, dest.address))

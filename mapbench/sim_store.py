@@ -2,7 +2,8 @@
 
 Each simulated node holds one chunk of table "bank" (a counter and `ACCOUNTS` accounts, the
 same genesis commit on every node). Its Raft state persists in the store through `raft_save`,
-as `RaftGroups._persist` does, and reads back as `RaftGroups.resume` does (`StoreDisk`). Committed
+as `RaftGroups._persist` does, and reads back as `RaftGroups.resume` does (`StoreDisk`);
+its messages travel as real ones do, through `raft_wire` and the envelope codec (`wire`). Committed
 entries are proposals, decided by `apply_proposal` on the node's store in one `exclusive()`
 transaction per Ready with `raft_applied(index, time)`, as `RaftGroups._apply_committed` does
 (`ChunkReplica`). The store survives a crash (it is on disk): a restarted node resumes from the
@@ -22,19 +23,13 @@ from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core import codec
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import LogRow
+from mapapi.net import codec as net_codec
+from mapapi.net.codec import Kind
+from mapapi.net.messages import RaftBatch
 from mapapi.store.memory import MemoryStore
 from mapapi.swarm.apply import Outcome, apply_proposal
-from mapapi.swarm.raft_types import (
-    NONE,
-    Config,
-    Entry,
-    EntryKind,
-    HardState,
-    PersistentState,
-    Ready,
-    Snapshot,
-)
+from mapapi.swarm.raft_types import NONE, Config, Entry, Message, PersistentState, Ready, Snapshot
+from mapapi.swarm.raft_wire import from_wire, rows, state_of, to_wire
 from mapbench.sim_world import A0, ACCOUNTS, BALANCE, Violation, step
 
 TABLE, TYPE_NAME = "bank", "google.protobuf.Struct"
@@ -80,14 +75,11 @@ def new_store(config: Config | None) -> MemoryStore:
         store.raft_save(CHUNK, hard=(0, NONE, 0))
         store.raft_applied(CHUNK, 0, GENESIS_TIME)
     else:
-        rows = [_row(e) for e in PersistentState.bootstrap(config).entries]
-        store.raft_save(CHUNK, hard=(1, NONE, 1), entries=rows)
+        store.raft_save(
+            CHUNK, hard=(1, NONE, 1), entries=rows(PersistentState.bootstrap(config).entries)
+        )
         store.raft_applied(CHUNK, 1, GENESIS_TIME)
     return store
-
-
-def _row(e: Entry) -> LogRow:
-    return LogRow(e.index, e.term, e.kind.value, e.data)
 
 
 class StoreDisk:
@@ -97,53 +89,73 @@ class StoreDisk:
         self.store = store
 
     def save(self, rd: Ready) -> None:
-        """Persist a Ready (`RaftGroups._persist`)."""
+        """Persist a Ready (as `RaftGroups._persist`: snapshot, entries, hard state)."""
         if rd.snapshot is None and not rd.entries and rd.hard_state is None:
             return
-        hs, snap = rd.hard_state, rd.snapshot
+        hs = rd.hard_state
         self.store.raft_save(
             CHUNK,
             hard=None if hs is None else (hs.term, hs.vote, hs.commit),
-            entries=[_row(e) for e in rd.entries],
-            snapshot=None
-            if snap is None
-            else (snap.index, snap.term, snap.config.encode(), snap.data),
+            entries=rows(rd.entries),
+            snapshot=None if rd.snapshot is None else _snapshot_row(rd.snapshot),
         )
 
     def save_snapshot(self, snap: Snapshot) -> None:
         """Persist a compaction."""
-        self.store.raft_save(
-            CHUNK, snapshot=(snap.index, snap.term, snap.config.encode(), snap.data)
-        )
+        self.store.raft_save(CHUNK, snapshot=_snapshot_row(snap))
 
     def state(self) -> PersistentState:
         """What a restarted node reads back (`RaftGroups.resume`)."""
         kept = self.store.raft_load(CHUNK)
         if kept is None:
             raise Violation("a node's store lost its chunk's Raft state")
-        config = Config.decode(kept.snap_config or b";")
-        snapshot = Snapshot(kept.snap_index, kept.snap_term, config, kept.snap_data)
-        entries = tuple(Entry(e.term, e.index, EntryKind(e.kind), e.data) for e in kept.entries)
-        return PersistentState(HardState(kept.term, kept.vote, kept.commit), snapshot, entries)
+        return state_of(kept)
+
+
+def _snapshot_row(snap: Snapshot) -> tuple[int, int, bytes, bytes]:
+    return snap.index, snap.term, snap.config.encode(), snap.data
+
+
+def wire(m: Message, envelope: bool = True) -> Message:
+    """A message after the trip a real one makes: `to_wire`, the envelope codec (with its
+    limits) if `envelope`, `from_wire`."""
+    batch = RaftBatch((to_wire(CHUNK, m),))
+    if envelope:
+        sent = net_codec.encode(net_codec.Envelope(0, peer(m.sender), 0, Kind.NOTIFY, batch))
+        received = net_codec.decode(sent).body
+        if not isinstance(received, RaftBatch) or len(received.messages) != 1:
+            raise Violation(f"a RaftBatch came out of the codec as {received!r}")
+        batch = received
+    return from_wire(batch.messages[0])
 
 
 class CommitHistory:
-    """The one history of commit ids in the chunk: every replica's is a prefix of it."""
+    """The one history of commit ids in the chunk: every replica's is a prefix of it, and
+    the counter moves by exactly the increment of each commit (no lost update)."""
 
     def __init__(self) -> None:
         self.ids: list[CommitId] = []
         self.index: dict[CommitId, int] = {}  # commit -> the log index that committed it
+        self.increments: dict[CommitId, int] = {}  # filled by the clients
+        self.counter = A0  # after the last commit of the history
 
-    def saw(self, nid: int, commits: list[CommitId], index: int) -> None:
-        """Node `nid` committed `commits[-1]` at log `index`."""
+    def saw(self, nid: int, commits: list[CommitId], index: int, counter: int) -> None:
+        """Node `nid` committed `commits[-1]` at log `index`, leaving `counter`."""
         position, cid = len(commits) - 1, commits[-1]
         if position < len(self.ids):
             if self.ids[position] != cid:
                 other = self.ids[position].short
                 raise Violation(f"node {nid}: commit #{position} is {cid.short}, others {other}")
         elif position == len(self.ids):
+            expected = self.counter + self.increments.get(cid, 0)
+            if counter != expected:
+                raise Violation(
+                    f"node {nid}: counter {counter} after {cid.short}, not {expected}: "
+                    "a lost update"
+                )
             self.ids.append(cid)
             self.index[cid] = index
+            self.counter = counter
         else:
             raise Violation(f"node {nid}: commit #{position} past the history ({len(self.ids)})")
         if self.index[cid] != index:
@@ -195,7 +207,8 @@ class ChunkReplica:
                 raise Violation(f"commit time {outcome.record.time} not past {self.time}")
             self.time = self._batch_time = outcome.record.time
             self.commits.append(outcome.record.id)
-            self.history.saw(self.nid, self.commits, entry.index)
+            counter = value(self.store.latest([COUNTER]).get(COUNTER))
+            self.history.saw(self.nid, self.commits, entry.index, counter)
         return outcome
 
     def install(self, snap: Snapshot) -> None:

@@ -11,7 +11,7 @@ from mapapi.store.base import ReplicaStore
 from mapapi.swarm import apply
 from mapapi.swarm.apply import Outcome
 from mapbench import sim_store
-from mapbench.sim import Sim, Violation
+from mapbench.sim import Sim, Violation, run_seeds
 from mapbench.sim_clients import CommitWorkload
 from mapbench.sim_store import CHUNK, ChunkReplica
 from mapbench.sim_world import A0
@@ -69,7 +69,7 @@ def test_a_lost_update_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
         return apply.apply_proposal(store, CHUNK, blinded)
 
     monkeypatch.setattr(sim_store, "apply_proposal", blind)
-    with pytest.raises(Violation, match=r"counter|bank accounts"):
+    with pytest.raises(Violation, match=r"lost update|bank accounts"):
         Sim(1, commits=True, faults=CALM).run()
 
 
@@ -93,3 +93,13 @@ def test_an_entry_applied_twice_is_caught() -> None:
     node.applied = committed.index - 1
     with pytest.raises(Violation, match="applied twice"):
         node.apply(committed)
+
+
+def test_bench_sim_runs_seeds_in_both_modes_and_reports_counts() -> None:
+    """`mapctl bench sim`'s runner: both modes, summed counts, no violation."""
+    result = run_seeds(3, 2)
+    assert result["runs"] == 4
+    assert result["violations"] == []
+    assert result["core"]["acked"] > 0
+    assert result["commits"]["commits"] > 0
+    assert result["commits"]["acked"] <= result["commits"]["commits"]
