@@ -101,8 +101,11 @@ class StoreDisk:
         )
 
     def save_snapshot(self, snap: Snapshot) -> None:
-        """Persist a compaction."""
-        self.store.raft_save(CHUNK, snapshot=_snapshot_row(snap))
+        """Persist a compaction: the snapshot, and the entries after it again (a snapshot
+        handed over by a `Ready` replaces the whole log; one of compaction keeps the rest)."""
+        kept = self.store.raft_load(CHUNK)
+        after = [] if kept is None else [e for e in kept.entries if e.index > snap.index]
+        self.store.raft_save(CHUNK, snapshot=_snapshot_row(snap), entries=after)
 
     def state(self) -> PersistentState:
         """What a restarted node reads back (`RaftGroups.resume`)."""

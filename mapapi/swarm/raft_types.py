@@ -240,8 +240,11 @@ class ReadState:
 class Ready:
     """Everything a node asks its driver to do, in this order (the order contract):
 
-    1. persist `snapshot` (if any), then `entries` (the first one replaces every stored entry
-       from its index on), then `hard_state` (if any); atomically or in that order, synced;
+    1. persist `snapshot` (if any: a leader's, which replaces the whole stored log, entries
+       after its index included, since they may belong to a branch that lost), then `entries`
+       (the first one replaces every stored entry from its index on), then `hard_state` (if
+       any); atomically or in that order, synced. (`RaftNode.compact` is the other kind: it
+       drops only the entries it covers.);
     2. only then send `messages`: a vote or an acknowledgement promises what was persisted;
     3. apply `snapshot`, then `committed_entries`, in order; serve `read_states` once applied;
     4. call `RaftNode.advance(ready)` before asking for the next `Ready`.

@@ -10,6 +10,7 @@ from mapapi.core.proposal import Proposal
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm import apply
 from mapapi.swarm.apply import Outcome
+from mapapi.swarm.raft_types import Config, Entry, EntryKind, Ready, Snapshot
 from mapbench import sim_store
 from mapbench.sim import Sim, Violation, run_seeds
 from mapbench.sim_clients import CommitWorkload
@@ -103,3 +104,29 @@ def test_bench_sim_runs_seeds_in_both_modes_and_reports_counts() -> None:
     assert result["core"]["acked"] > 0
     assert result["commits"]["commits"] > 0
     assert result["commits"]["acked"] <= result["commits"]["commits"]
+
+
+STORE_KEEPS_A_LOST_BRANCH = (
+    "MemoryStore.raft_save and raft_sql.save keep the entries after a leader's snapshot; "
+    "reported to the store's owner: a Ready's snapshot replaces the whole log"
+)
+
+
+@pytest.mark.xfail(reason=STORE_KEEPS_A_LOST_BRANCH, strict=True)
+def test_a_snapshot_from_a_leader_replaces_the_whole_stored_log() -> None:
+    """Seed 81 of seven nodes (five voters): node 1 held entries 76.. of term 2, a branch
+    that lost; it restored the leader's snapshot (76, term 3), and its store kept 77..99 of
+    term 2 after it. Restarted, it read back a log that breaks Log Matching (and a last term
+    of 2, so it would grant votes to candidates that lack the committed (76, 3))."""
+    run_seed(81, nodes=7, voters=5, fault_ticks=300, commits=True)
+
+
+@pytest.mark.xfail(reason=STORE_KEEPS_A_LOST_BRANCH, strict=True)
+def test_the_store_drops_a_lost_branch_with_a_leaders_snapshot() -> None:
+    """The same, at the store: a restored snapshot leaves no entry after it."""
+    store = sim_store.new_store(None)
+    branch = [Entry(2, i, EntryKind.NORMAL, b"lost") for i in range(1, 6)]
+    disk = sim_store.StoreDisk(store)
+    disk.save(Ready(entries=tuple(branch)))
+    disk.save(Ready(snapshot=Snapshot(3, 3, Config(frozenset({1})), b"")))
+    assert disk.state().entries == ()
