@@ -4,10 +4,11 @@ Routing follows the Chord paper (Stoica et al., SIGCOMM 2001): lookups are
 iterative, each step asks a node for `ring.next_hop` over its fingers and
 successor list, so a lookup takes O(log n) hops once fingers are fixed; the
 periodic stabilize / fix-fingers / check-predecessor tasks repair the ring as
-nodes join, leave and fail. The node stores soft-state sets (`storage.Storage`):
-the owner of a key applies `add` / `remove` itself, atomically, and copies the
-change to its successor list; keys move to a newcomer when it notifies its
-successor, and to the successor on a graceful `leave()`.
+nodes join, leave and fail (`upkeep.RingUpkeep`). The node stores soft-state
+sets (`values.RingValues` over `storage.Storage`): the owner of a key applies
+`add` / `remove` itself, atomically, and copies the change to its successor
+list; keys move to a newcomer when it notifies its successor, and to the
+successor on a graceful `leave()`.
 """
 
 from __future__ import annotations
@@ -17,18 +18,19 @@ import contextlib
 import logging
 import time
 from collections.abc import Callable, Coroutine
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, TypeVar
 
-from mapapi.core import limits
-from mapapi.core.errors import MapError, NetworkError, ProtocolError
+from mapapi.core.errors import MapError, NetworkError
 from mapapi.core.ids import PeerId
 from mapapi.lookup.dht import ring
+from mapapi.lookup.dht.ring_wire import Node, key_bytes, key_from, node_of, wire
 from mapapi.lookup.dht.storage import Storage
+from mapapi.lookup.dht.upkeep import RingUpkeep
+from mapapi.lookup.dht.values import MemberFilter, RingValues
 from mapapi.net.codec import Kind
 from mapapi.net.messages import (
     Ack,
     ChordAdd,
-    ChordEntry,
     ChordFindSuccessor,
     ChordGet,
     ChordGetNeighbours,
@@ -36,56 +38,18 @@ from mapapi.net.messages import (
     ChordLeave,
     ChordNeighbours,
     ChordNotify,
-    ChordPeer,
     ChordRemove,
     ChordStore,
-    ChordValues,
 )
-from mapapi.net.rpc import Request, Rpc, ask_all
+from mapapi.net.rpc import Request, Rpc
 
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 
-MemberFilter = Callable[[bytes], Callable[[bytes], bool]]
-"""A named server-side filter of `ChordNode.get`: given the query's argument, the
-predicate each stored member must pass. It raises ValueError on a bad argument."""
-
-_KEY_BYTES = ring.RING_BITS // 8
 _MAX_HOPS = 2 * ring.RING_BITS
 _ATTEMPTS = 4
 _NOBODY = PeerId("00" * 16)  # the sender of a request a node serves to itself
-
-
-class Node(NamedTuple):
-    """A node of the ring: its key and its Rpc address."""
-
-    key: int
-    address: str
-
-
-def key_bytes(key: int) -> bytes:
-    """A ring key as it travels: 20 big-endian bytes."""
-    return key.to_bytes(_KEY_BYTES, "big")
-
-
-def key_from(raw: bytes) -> int:
-    """The ring key of 20 wire bytes.
-
-    Raises:
-        ProtocolError: not 20 bytes.
-    """
-    if len(raw) != _KEY_BYTES:
-        raise ProtocolError(f"a ring key is {_KEY_BYTES} bytes, got {len(raw)}")
-    return int.from_bytes(raw, "big")
-
-
-def _wire(node: Node) -> ChordPeer:
-    return ChordPeer(key_bytes(node.key), node.address)
-
-
-def _node(peer: ChordPeer) -> Node:
-    return Node(key_from(peer.key), peer.address)
 
 
 class ChordNode:
@@ -123,26 +87,23 @@ class ChordNode:
         self.storage = Storage()
         self.clock = clock
         self.timeout = timeout
-        self._k = successors
+        self.k = successors  # the successor list's length, also the replication factor
         self._periods = (stabilize_period, fix_fingers_period, check_predecessor_period)
         self._suspects: dict[int, float] = {}  # key -> until (real time): found dead
-        self._replicated: set[Node] = set()
-        self._replicated_for: Node | None = None  # the predecessor when last replicated
-        self._stabilizing = asyncio.Lock()
-        self._fixing = asyncio.Lock()
         self._tasks: list[asyncio.Task[None]] = []
         self._round = asyncio.Event()  # set (and replaced) after each periodic step
-        self._filters: dict[str, MemberFilter] = {}
+        self.values = RingValues(self)
+        self.upkeep = RingUpkeep(self)
         self.requests_sent = 0  # to other nodes, for benchmarks (paper Fig. 8)
         self._handlers: dict[type, Callable[[Request], Any]] = {
             ChordFindSuccessor: self.rpc_find_successor,
             ChordGetNeighbours: self.rpc_get_neighbours,
             ChordNotify: self.rpc_notify,
             ChordLeave: self.rpc_leave,
-            ChordAdd: self.rpc_add,
-            ChordRemove: self.rpc_remove,
-            ChordGet: self.rpc_get,
-            ChordStore: self.rpc_store,
+            ChordAdd: self.values.rpc_add,
+            ChordRemove: self.values.rpc_remove,
+            ChordGet: self.values.rpc_get,
+            ChordStore: self.values.rpc_store,
         }
         for body, handler in self._handlers.items():
             rpc.register(body, self._proof_of_life(handler))
@@ -197,7 +158,7 @@ class ChordNode:
         Raises:
             NetworkError: the member did not answer in time.
         """
-        successor, _ = await self._lookup(self.key, Node(0, address), retry=False)
+        successor, _ = await self.lookup(self.key, Node(0, address), retry=False)
         self.predecessor = None
         self.successors = [successor]
         await self.stabilize_once()
@@ -213,7 +174,7 @@ class ChordNode:
         Raises:
             NetworkError: the member did not answer in time.
         """
-        found, _ = await self._lookup(self.key, Node(0, address), retry=False)
+        found, _ = await self.lookup(self.key, Node(0, address), retry=False)
         successor = self.successors[0]
         if found == self.me or found == successor:
             return False
@@ -222,27 +183,27 @@ class ChordNode:
         ):
             return False
         self._suspects.pop(found.key, None)
-        self.successors = [found, *(s for s in self.successors if s != found)][: self._k]
+        self.successors = [found, *(s for s in self.successors if s != found)][: self.k]
         return True
 
     async def leave(self) -> None:
         """Leave gracefully: stop the tasks, hand every value to the successor and
         tell the predecessor and successor who replaces this node."""
         await self.close()
-        pred = () if self.predecessor is None else (_wire(self.predecessor),)
-        entries = self._entries()
+        pred = () if self.predecessor is None else (wire(self.predecessor),)
+        entries = self.values.entries()
         for successor in [s for s in self.successors if s != self.me]:
-            bye = ChordLeave(_wire(self.me), pred, ())
+            bye = ChordLeave(wire(self.me), pred, ())
             try:
-                await self._call(successor, ChordStore(entries, replicate=True), Ack)
-                await self._call(successor, bye, Ack)
+                await self.call(successor, ChordStore(entries, replicate=True), Ack)
+                await self.call(successor, bye, Ack)
                 break
             except NetworkError:
                 continue
         if self.predecessor is not None and self.predecessor != self.me:
-            rest = tuple(_wire(s) for s in self.successors if s != self.predecessor)
+            rest = tuple(wire(s) for s in self.successors if s != self.predecessor)
             with contextlib.suppress(NetworkError):
-                await self._call(self.predecessor, ChordLeave(_wire(self.me), (), rest), Ack)
+                await self.call(self.predecessor, ChordLeave(wire(self.me), (), rest), Ack)
         self.predecessor, self.successors = None, [self.me]
 
     # -- lookups -----------------------------------------------------------------------
@@ -255,10 +216,10 @@ class ChordNode:
         """
         if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key < ring.RING_SIZE:
             raise ValueError(f"a ring key is an int in [0, 2**{ring.RING_BITS}), got {key!r}")
-        node, hops = await self._lookup(key, self.me)
+        node, hops = await self.lookup(key, self.me)
         return node.key, node.address, hops
 
-    async def _lookup(self, key: int, start: Node, *, retry: bool = True) -> tuple[Node, int]:
+    async def lookup(self, key: int, start: Node, *, retry: bool = True) -> tuple[Node, int]:
         avoid = self._suspected()
         error: NetworkError | None = None
         for _ in range(_ATTEMPTS if retry else 1):
@@ -269,15 +230,15 @@ class ChordNode:
                 else:
                     ask = ChordFindSuccessor(key_bytes(key), tuple(key_bytes(a) for a in avoid))
                     try:
-                        reply = await self._call(current, ask, ChordHop)
+                        reply = await self.call(current, ask, ChordHop)
                     except NetworkError as exc:
                         if not retry:
                             raise
                         error = exc
-                        avoid.add(self._suspect(current))
+                        avoid.add(self.suspect(current))
                         break
                     hops += 1
-                    current = _node(reply.node)
+                    current = node_of(reply.node)
                     if reply.final:
                         return current, hops
                     continue
@@ -299,7 +260,7 @@ class ChordNode:
                 return node
         raise LookupError(f"{key:#x} is not a node this node knows")  # unreachable
 
-    def _suspect(self, node: Node) -> int:
+    def suspect(self, node: Node) -> int:
         """Forget a node that did not answer (found dead) for a while."""
         self._suspects[node.key] = time.monotonic() + 10 * max(self._periods)
         self.fingers = [None if f == node else f for f in self.fingers]
@@ -313,152 +274,45 @@ class ChordNode:
         Bye), so its place in our fingers and successor list is stale."""
         for node in {n for n in (*self.successors, *self.fingers) if n is not None}:
             if node.address == address and node != self.me:
-                self._suspect(node)
+                self.suspect(node)
         if self.predecessor is not None and self.predecessor.address == address:
-            self._suspect(self.predecessor)
+            self.suspect(self.predecessor)
 
     def _suspected(self) -> set[int]:
         now = time.monotonic()
         self._suspects = {k: until for k, until in self._suspects.items() if until > now}
         return set(self._suspects)
 
-    # -- periodic maintenance (Chord paper Fig. 7) ----------------------------------------
+    # -- periodic maintenance (`RingUpkeep`, Chord paper Fig. 7) -------------------------
     async def stabilize_once(self) -> None:
-        """Ask the successor for its predecessor, adopt it if closer, notify the
-        successor, refresh the successor list and re-replicate to newcomers in it."""
-        async with self._stabilizing:
-            successor, neighbours = await self._live_successor()
-            pred = neighbours.predecessor
-            if pred and ring.in_interval(
-                _node(pred[0]).key, self.key, successor.key, inclusive_right=False
-            ):
-                candidate = _node(pred[0])
-                try:
-                    neighbours = await self._neighbours(candidate)
-                    successor = candidate
-                except NetworkError:
-                    self._suspect(candidate)
-            chain = [successor, *(_node(p) for p in neighbours.successors)]
-            fresh: list[Node] = []
-            for node in chain:
-                if node == self.me or len(fresh) == self._k:
-                    break
-                if node not in fresh:
-                    fresh.append(node)
-            self.successors = fresh or [self.me]
-            if successor != self.me:
-                await self._call(successor, ChordNotify(_wire(self.me)), Ack)
-            await self._replicate_to_new_successors()
-
-    async def _live_successor(self) -> tuple[Node, ChordNeighbours]:
-        for successor in list(self.successors):
-            try:
-                return successor, await self._neighbours(successor)
-            except NetworkError:
-                self._suspect(successor)
-        return self.me, await self._neighbours(self.me)  # every successor is gone
-
-    async def _neighbours(self, node: Node) -> ChordNeighbours:
-        if node == self.me:
-            return self.rpc_get_neighbours()
-        return await self._call(node, ChordGetNeighbours(), ChordNeighbours)
+        """One stabilize round (`RingUpkeep.stabilize_once`)."""
+        await self.upkeep.stabilize_once()
 
     async def fix_fingers_once(self) -> None:
-        """Recompute the whole finger table; finger `i` reuses finger `i-1` when its
-        start falls before that node, so a round costs O(log n) lookups."""
-        async with self._fixing:
-            last: Node | None = None
-            for i in range(ring.RING_BITS):
-                start = ring.finger_start(self.key, i)
-                if last is None or not ring.in_interval(
-                    start, self.key, last.key, inclusive_right=True
-                ):
-                    last, _ = await self._lookup(start, self.me)
-                self.fingers[i] = last
+        """Recompute the whole finger table (`RingUpkeep.fix_fingers_once`)."""
+        await self.upkeep.fix_fingers_once()
 
     async def check_predecessor_once(self) -> None:
-        """Forget the predecessor if it does not answer; drop expired values."""
-        self.storage.expire(self.clock())
-        if self.predecessor is not None and self.predecessor != self.me:
-            try:
-                await self._neighbours(self.predecessor)
-            except NetworkError:
-                self._suspect(self.predecessor)
+        """Forget a dead predecessor; drop expired values."""
+        await self.upkeep.check_predecessor_once()
 
-    # -- values -------------------------------------------------------------------------
+    # -- values (`RingValues`) --------------------------------------------------------------
     async def add(self, key: int, member: bytes, ttl: float) -> None:
-        """Add `member` to the set under `key` for `ttl` seconds (re-add to refresh).
-
-        Raises:
-            NetworkError: the key's owner could not be reached.
-            LimitExceeded: `ttl` is not in (0, limits.MAX_TTL] (a ValueError).
-        """
-        limits.ttl(ttl)
-        await self._at_owner(key, ChordAdd(key_bytes(key), member, ttl), Ack)
+        """Add `member` to the set under `key` for `ttl` seconds (`RingValues.add`)."""
+        await self.values.add(key, member, ttl)
 
     async def remove(self, key: int, member: bytes) -> None:
         """Remove `member` from the set under `key`."""
-        await self._at_owner(key, ChordRemove(key_bytes(key), member), Ack)
+        await self.values.remove(key, member)
 
     def register_filter(self, name: str, member_filter: MemberFilter) -> None:
-        """Let `get(key, filter=name, ...)` keep only the members `member_filter`
-        passes, evaluated at the key's owner. Every node of the ring must
-        register the same filters (the peers of one version do)."""
-        self._filters[name] = member_filter
+        """Let `get(key, filter=name, ...)` keep only what `member_filter` passes
+        (`RingValues.register_filter`)."""
+        self.values.register_filter(name, member_filter)
 
     async def get(self, key: int, filter: str = "", argument: bytes = b"") -> set[bytes]:
-        """The live members under `key`; with `filter`, those the owner's filter of
-        that name keeps for `argument`.
-
-        Raises:
-            NetworkError: the key's owner could not be reached.
-            ProtocolError: the owner has no such filter, or refused the argument.
-        """
-        body = ChordGet(key_bytes(key), filter, argument)
-        values = await self._at_owner(key, body, ChordValues)
-        return set(values.members)
-
-    async def _at_owner(self, key: int, body: object, expect: type[T]) -> T:
-        error: NetworkError | None = None
-        for _ in range(_ATTEMPTS):
-            owner, _ = await self._lookup(key, self.me)
-            try:
-                return await self._call(owner, body, expect)
-            except NetworkError as exc:
-                error = exc
-                self._suspect(owner)
-        assert error is not None
-        raise error
-
-    def _entries(self, where: Callable[[int], bool] = lambda _key: True) -> tuple[ChordEntry, ...]:
-        return tuple(
-            ChordEntry(key_bytes(k), m, ttl)
-            for k, m, ttl in self.storage.entries(self.clock(), where)
-        )
-
-    def _owns(self, key: int) -> bool:
-        pred = self.predecessor
-        return pred is None or ring.responsible(key, self.key, pred.key)
-
-    async def _replicate(self, body: object, targets: list[Node] | None = None) -> None:
-        targets = [s for s in (self.successors if targets is None else targets) if s != self.me]
-        answers = await ask_all({s: self._call(s, body, Ack) for s in targets})
-        for node, error in answers.failed.items():
-            log.debug("replica %s missed an update: %s", node.address, error)
-
-    async def _replicate_to_new_successors(self) -> None:
-        """Copy the keys this node owns to successors that may lack them: new ones
-        in the list, or all of them once the predecessor changed (a crashed
-        predecessor's keys are ours now, and its successors beyond ours never had
-        them), so every key is back at k + 1 nodes after each repair."""
-        if self.predecessor != self._replicated_for:
-            self._replicated = set()
-            self._replicated_for = self.predecessor
-        new = [s for s in self.successors if s != self.me and s not in self._replicated]
-        self._replicated = set(self.successors)
-        entries = self._entries(self._owns)
-        if new and entries:
-            await self._replicate(ChordStore(entries), new)
+        """The live members under `key` (`RingValues.get`)."""
+        return await self.values.get(key, filter, argument)
 
     # -- handlers --------------------------------------------------------------------------
     def _proof_of_life(self, handler: Callable[[Request], Any]) -> Callable[[Request], Any]:
@@ -470,7 +324,7 @@ class ChordNode:
 
         return serve
 
-    async def _call(self, node: Node, body: object, expect: type[T]) -> T:
+    async def call(self, node: Node, body: object, expect: type[T]) -> T:
         if node == self.me:  # served locally, as a remote would
             request = Request(_NOBODY, 0, 0, Kind.REQUEST, body)
             result = self._handlers[type(body)](request)
@@ -489,16 +343,16 @@ class ChordNode:
         """One lookup step: the key's successor, or the next node to ask."""
         body: ChordFindSuccessor = req.body
         hop = self._next_hop(key_from(body.key), {key_from(a) for a in body.avoid})
-        return ChordHop(_wire(self._known(hop.node)), hop.final)
+        return ChordHop(wire(self._known(hop.node)), hop.final)
 
     def rpc_get_neighbours(self, req: Request | None = None) -> ChordNeighbours:
         """This node's predecessor and successor list."""
-        pred = () if self.predecessor is None else (_wire(self.predecessor),)
-        return ChordNeighbours(pred, tuple(_wire(s) for s in self.successors))
+        pred = () if self.predecessor is None else (wire(self.predecessor),)
+        return ChordNeighbours(pred, tuple(wire(s) for s in self.successors))
 
     async def rpc_notify(self, req: Request) -> Ack:
         """A node might be our predecessor; if it is, hand it the keys it now owns."""
-        node = _node(req.body.node)
+        node = node_of(req.body.node)
         old = self.predecessor
         if node == self.me or not (
             old is None or ring.in_interval(node.key, old.key, self.key, inclusive_right=False)
@@ -507,9 +361,9 @@ class ChordNode:
         # Hand the keys over first: until `node` is our predecessor, nobody routes
         # to it (our predecessor adopts it from our answer), so no lookup can
         # reach it before it holds them.
-        entries = self._entries(lambda k: not ring.responsible(k, self.key, node.key))
+        entries = self.values.entries(lambda k: not ring.responsible(k, self.key, node.key))
         if entries:
-            await self._call(node, ChordStore(entries), Ack)
+            await self.call(node, ChordStore(entries), Ack)
             old = self.predecessor  # another node may have notified meanwhile
             if old is not None and not ring.in_interval(
                 node.key, old.key, self.key, inclusive_right=False
@@ -525,77 +379,19 @@ class ChordNode:
         """A neighbour leaves: take its predecessor, or splice in its successors and
         pass the news to our predecessor, whose list may hold it too (at most k hops)."""
         body: ChordLeave = req.body
-        gone = _node(body.node)
+        gone = node_of(body.node)
         if self.predecessor == gone:
-            self.predecessor = _node(body.predecessor[0]) if body.predecessor else None
+            self.predecessor = node_of(body.predecessor[0]) if body.predecessor else None
         self.fingers = [None if f == gone else f for f in self.fingers]
         if self.predecessor == self.me:
             self.predecessor = None
         if gone not in self.successors:
             return Ack()
-        rest = [_node(p) for p in body.successors]
+        rest = [node_of(p) for p in body.successors]
         merged = [s for s in self.successors[: self.successors.index(gone)] + rest if s != self.me]
-        self.successors = list(dict.fromkeys(merged))[: self._k] or [self.me]
+        self.successors = list(dict.fromkeys(merged))[: self.k] or [self.me]
         pred = self.predecessor
         if pred is not None and pred != gone and body.successors:
             with contextlib.suppress(NetworkError):
-                await self._call(pred, ChordLeave(body.node, (), body.successors), Ack)
-        return Ack()
-
-    async def rpc_add(self, req: Request) -> Ack:
-        """Add a member, atomically here; the owner copies it down the successor list."""
-        body: ChordAdd = req.body
-        key = key_from(body.key)
-        self.storage.add(key, body.member, body.ttl, self.clock())
-        if not body.replica:
-            copy = ChordAdd(body.key, body.member, body.ttl, replica=True)
-            await self._replicate(copy, self._copy_targets(key))
-        return Ack()
-
-    async def rpc_remove(self, req: Request) -> Ack:
-        """Remove a member here; the owner copies the removal down the successor list."""
-        body: ChordRemove = req.body
-        key = key_from(body.key)
-        self.storage.remove(key, body.member)
-        if not body.replica:
-            copy = ChordRemove(body.key, body.member, replica=True)
-            await self._replicate(copy, self._copy_targets(key))
-        return Ack()
-
-    def _copy_targets(self, key: int) -> list[Node]:
-        """Where an update of `key` sent here goes on: the successor list, and the
-        predecessor if that owns the key. A lookup through routes that predate a
-        join ends here, at the joiner's successor, after this node handed the
-        joiner its keys (`rpc_notify`): without the copy the owner would miss it."""
-        pred = self.predecessor
-        if pred is None or self._owns(key):
-            return list(self.successors)
-        return [pred, *self.successors]
-
-    def rpc_get(self, req: Request) -> ChordValues:
-        """The live members of a key stored here (those the filter keeps, if any)."""
-        body: ChordGet = req.body
-        members = self.storage.get(key_from(body.key), self.clock())
-        if body.filter:
-            make = self._filters.get(body.filter)
-            if make is None:
-                raise ProtocolError(f"no member filter {body.filter!r} on this node")
-            try:
-                keep = make(body.argument)
-            except ValueError as exc:
-                raise ProtocolError(f"bad argument to filter {body.filter!r}: {exc}") from exc
-            members = {m for m in members if keep(m)}
-        return ChordValues(tuple(sorted(members)))
-
-    async def rpc_store(self, req: Request) -> Ack:
-        """Store handed-over or replicated entries; with `replicate`, copy them on."""
-        body: ChordStore = req.body
-        now = self.clock()
-        for entry in body.entries:  # all checked before any is stored
-            key_from(entry.key)
-            limits.ttl(entry.ttl)
-        for entry in body.entries:
-            self.storage.add(key_from(entry.key), entry.member, entry.ttl, now)
-        if body.replicate and body.entries:
-            await self._replicate(ChordStore(body.entries))
+                await self.call(pred, ChordLeave(body.node, (), body.successors), Ack)
         return Ack()
