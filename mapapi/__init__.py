@@ -38,7 +38,7 @@ from mapapi.maps.schema import MISSIONS, Mission
 from mapapi.net.security import Security, key_text, parse_key
 from mapapi.service.clone import Cloned, clone
 from mapapi.service.control import RemoteOperations
-from mapapi.service.daemon import stop_daemon
+from mapapi.service.daemon_process import stop_daemon
 from mapapi.service.ops import Operations, call_polled, check_address
 from mapapi.service.peer import Peer
 from mapapi.service.repo import PeerRecord, Repository

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.rules import map_rules
-from mapapi.service import daemon
+from mapapi.service import daemon, daemon_process
 from mapapi.service.control import RemoteOperations
 from mapapi.service.ops import DaemonOperations, Operations, RepoOperations
 from mapapi.service.peer import Peer
@@ -104,5 +104,5 @@ def start_daemon(
 ) -> PeerRecord:
     """Start the peer daemon of `repo` in the background (`mapctl peer start` in a
     new session); its record once it serves."""
-    argv = daemon.daemon_command(repo, listen, join, advertise, verbose)
-    return daemon.spawn_detached(repo, argv)
+    argv = daemon_process.daemon_command(repo, listen, join, advertise, verbose)
+    return daemon_process.spawn_detached(repo, argv)

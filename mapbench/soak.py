@@ -46,7 +46,7 @@ from mapapi.core.errors import (
     ViewClosedError,
 )
 from mapapi.service.control import RemoteOperations
-from mapapi.service.daemon import daemon_command, spawn_detached, stop_daemon
+from mapapi.service.daemon_process import daemon_command, spawn_detached, stop_daemon
 from mapapi.service.repo import Repository
 from mapbench.demo.swarm import LocalSwarm, SwarmPeer
 

@@ -18,7 +18,7 @@ from typing import Any
 from mapapi.core.errors import MapError, UsageError
 from mapapi.net.security import split_address
 from mapapi.service.control import RemoteOperations
-from mapapi.service.daemon import daemon_command, spawn_detached
+from mapapi.service.daemon_process import daemon_command, spawn_detached
 from mapapi.service.ops import call_polled, check_address
 from mapapi.service.repo import PeerRecord, Repository
 

@@ -1,7 +1,7 @@
 """`LocalSwarm`: peer daemons in the repositories of one folder, for `mapctl demo`.
 
 Each peer is a real `mapctl peer start` process, started the way `peer start
---detach` starts one (`mapapi.service.daemon.spawn_detached`) and driven over its
+--detach` starts one (`mapapi.service.daemon_process.spawn_detached`) and driven over its
 control endpoint with the operations `mapctl` uses (`RemoteOperations`).
 
 `stop()` does not rely on what this process remembers: it stops the daemon of
@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from mapapi.service.control import RemoteOperations
-from mapapi.service.daemon import daemon_command, spawn_detached, stop_daemon
+from mapapi.service.daemon_process import daemon_command, spawn_detached, stop_daemon
 from mapapi.service.repo import PeerRecord, Repository
 
 log = logging.getLogger(__name__)

@@ -22,7 +22,8 @@ import pytest
 
 from mapapi import Repository
 from mapapi.service import known_peers
-from mapapi.service.daemon import advertised_address, stop_daemon
+from mapapi.service.daemon import advertised_address
+from mapapi.service.daemon_process import stop_daemon
 from mapapi.service.repo import PeerRecord
 from mapapi.testing import wait_until
 from tests.cli.conftest import STRUCT, InProcessDaemon, Mapctl

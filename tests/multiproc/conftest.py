@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from mapapi import Repository
-from mapapi.service.daemon import stop_daemon
+from mapapi.service.daemon_process import stop_daemon
 
 COMMAND_TIMEOUT = 30.0
 
