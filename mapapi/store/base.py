@@ -180,8 +180,9 @@ class ReplicaStore(Store, Protocol):
         entries: Sequence[LogRow] = (),
         snapshot: tuple[int, int, bytes, bytes] | None = None,
     ) -> None:
-        """Persist a snapshot, then entries (replacing the log from the first one's
-        index on), then the hard state (term, vote, commit), atomically."""
+        """Persist a snapshot (it replaces the whole stored log), then entries
+        (replacing the log from the first one's index on), then the hard state
+        (term, vote, commit), atomically."""
 
     def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
         """Record the applied index and the newest commit time it brought; inside

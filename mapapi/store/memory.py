@@ -275,7 +275,7 @@ class MemoryStore:
                     snap_config=config,
                     snap_data=data,
                     commit=max(kept.commit, index),
-                    entries=tuple(e for e in kept.entries if e.index > index),
+                    entries=(),  # a leader's snapshot replaces the whole log
                 )
             if entries:
                 first = entries[0].index

@@ -72,8 +72,8 @@ def save(
     snapshot: tuple[int, int, bytes, bytes] | None = None,
 ) -> None:
     """Persist one `Ready`'s worth of state, in the Ready order contract's order:
-    the snapshot (it replaces the log up to its index), then the entries (the
-    first replaces every stored entry from its index on), then the hard state.
+    the snapshot (it replaces the whole stored log), then the entries (the first
+    replaces every stored entry from its index on), then the hard state.
 
     Args:
         hard: (term, vote, commit index).
@@ -87,7 +87,9 @@ def save(
             "commit_index = MAX(commit_index, ?) WHERE chunk_id = ?",
             (index, term, config, data, index, chunk),
         )
-        con.execute("DELETE FROM raft_log WHERE chunk_id = ? AND idx <= ?", (chunk, index))
+        # A leader's snapshot replaces the whole log: entries after it may be a branch
+        # that lost (simulator seed 81); the leader sends what follows it.
+        con.execute("DELETE FROM raft_log WHERE chunk_id = ?", (chunk,))
     if entries:
         con.execute(
             "DELETE FROM raft_log WHERE chunk_id = ? AND idx >= ?", (chunk, entries[0].index)

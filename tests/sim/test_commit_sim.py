@@ -106,13 +106,8 @@ def test_bench_sim_runs_seeds_in_both_modes_and_reports_counts() -> None:
     assert result["commits"]["acked"] <= result["commits"]["commits"]
 
 
-STORE_KEEPS_A_LOST_BRANCH = (
-    "MemoryStore.raft_save and raft_sql.save keep the entries after a leader's snapshot; "
-    "reported to the store's owner: a Ready's snapshot replaces the whole log"
-)
 
 
-@pytest.mark.xfail(reason=STORE_KEEPS_A_LOST_BRANCH, strict=True)
 def test_a_snapshot_from_a_leader_replaces_the_whole_stored_log() -> None:
     """Seed 81 of seven nodes (five voters): node 1 held entries 76.. of term 2, a branch
     that lost; it restored the leader's snapshot (76, term 3), and its store kept 77..99 of
@@ -121,7 +116,6 @@ def test_a_snapshot_from_a_leader_replaces_the_whole_stored_log() -> None:
     run_seed(81, nodes=7, voters=5, fault_ticks=300, commits=True)
 
 
-@pytest.mark.xfail(reason=STORE_KEEPS_A_LOST_BRANCH, strict=True)
 def test_the_store_drops_a_lost_branch_with_a_leaders_snapshot() -> None:
     """The same, at the store: a restored snapshot leaves no entry after it."""
     store = sim_store.new_store(None)

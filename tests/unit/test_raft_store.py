@@ -52,9 +52,9 @@ class TestPersist:
         assert kept is not None
         assert [(e.index, e.term) for e in kept.entries] == [(1, 1), (2, 1), (3, 3)]
 
-    def test_a_snapshot_replaces_the_log_it_covers(self, store: Store) -> None:
-        store.raft_save(CHUNK, entries=rows(1, 1, 2, 2))
-        store.raft_save(CHUNK, snapshot=(3, 2, b"1,2;", b"state"))
+    def test_a_snapshot_replaces_the_whole_log(self, store: Store) -> None:
+        store.raft_save(CHUNK, entries=rows(1, 1, 2, 2, 2))  # 4 and 5: a branch that lost
+        store.raft_save(CHUNK, snapshot=(3, 2, b"1,2;", b"state"), entries=rows(3, start=4))
         kept = store.raft_load(CHUNK)
         assert kept is not None
         assert (kept.snap_index, kept.snap_term, kept.snap_config, kept.snap_data) == (
@@ -63,7 +63,7 @@ class TestPersist:
             b"1,2;",
             b"state",
         )
-        assert [e.index for e in kept.entries] == [4]
+        assert [(e.index, e.term) for e in kept.entries] == [(4, 3)]
         assert kept.commit == 3  # a snapshot holds committed state only
 
     def test_drop_forgets_the_group(self, store: Store) -> None:
