@@ -195,6 +195,16 @@ class ReplicaStore(Store, Protocol):
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log (0 if none)."""
 
+    def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
+        """Append a commit's link to the chunk's hash chain (inside `exclusive()`,
+        with the commit it stands for)."""
+
+    def chain_head(self, chunk_id: ChunkId) -> bytes | None:
+        """The chunk's newest link, or None before its first commit through the log."""
+
+    def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """Every (commit, link) of the chunk's chain, oldest first."""
+
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""
 

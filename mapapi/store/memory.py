@@ -26,6 +26,7 @@ class MemoryStore:
         self._views: dict[str, bytes] = {}
         self._holders: dict[ChunkId, set[PeerId]] = {}
         self._raft: dict[ChunkId, RaftRecord] = {}
+        self._chains: dict[ChunkId, list[tuple[CommitId, bytes]]] = {}
 
     def close(self) -> None:
         """Nothing to release."""
@@ -302,6 +303,22 @@ class MemoryStore:
                 )
             self._raft[chunk_id] = replace(kept, applied=index, time=max(kept.time, time))
 
+    def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
+        """Append a commit's link to the chunk's hash chain."""
+        with self._lock:
+            self._chains.setdefault(chunk_id, []).append((commit_id, link))
+
+    def chain_head(self, chunk_id: ChunkId) -> bytes | None:
+        """The chunk's newest link, or None."""
+        with self._lock:
+            chain = self._chains.get(chunk_id)
+            return chain[-1][1] if chain else None
+
+    def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """Every (commit, link) of the chunk's chain, oldest first."""
+        with self._lock:
+            return list(self._chains.get(chunk_id, []))
+
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
         with self._lock:
@@ -312,3 +329,4 @@ class MemoryStore:
         """Forget the chunk's group state."""
         with self._lock:
             self._raft.pop(chunk_id, None)
+            self._chains.pop(chunk_id, None)

@@ -3,7 +3,8 @@
 Per chunk: the hard state (term, vote, commit index), the index applied to the
 store's revisions and the newest commit time they brought (the chunk's clock,
 which every holder derives from the same log), the last snapshot's metadata,
-and the log after it. Kept in
+the log after it, and the hash chain of the commits the log applied
+(`core/chain.py`: one link per commit, the last one the chunk's head). Kept in
 the same file as the revisions so that an entry's effect and the applied index
 move in one SQL transaction (`SqliteStore.exclusive`): after a crash nothing is
 applied twice and nothing applied is forgotten.
@@ -26,6 +27,9 @@ CREATE TABLE IF NOT EXISTS raft_state (
     applied INTEGER NOT NULL DEFAULT 0, snap_index INTEGER NOT NULL DEFAULT 0,
     snap_term INTEGER NOT NULL DEFAULT 0, snap_config BLOB NOT NULL DEFAULT x'',
     snap_data BLOB NOT NULL DEFAULT x'', time INTEGER NOT NULL DEFAULT 0);
+CREATE TABLE IF NOT EXISTS raft_chain (
+    chunk_id TEXT NOT NULL, seq INTEGER NOT NULL, commit_id TEXT NOT NULL, link BLOB NOT NULL,
+    PRIMARY KEY (chunk_id, seq)) WITHOUT ROWID;
 CREATE TABLE IF NOT EXISTS raft_log (
     chunk_id TEXT NOT NULL, idx INTEGER NOT NULL, term INTEGER NOT NULL,
     kind INTEGER NOT NULL, data BLOB NOT NULL,
@@ -132,4 +136,36 @@ def chunk_time(con: sqlite3.Connection, chunk: str) -> int:
 def drop(con: sqlite3.Connection, chunk: str) -> None:
     """Forget `chunk`'s group (this peer no longer holds the chunk)."""
     con.execute("DELETE FROM raft_log WHERE chunk_id = ?", (chunk,))
+    con.execute("DELETE FROM raft_chain WHERE chunk_id = ?", (chunk,))
     con.execute("DELETE FROM raft_state WHERE chunk_id = ?", (chunk,))
+
+
+RAFT_TABLES = ("raft_state", "raft_log", "raft_chain")
+"""The tables above; an older store gains the ones it lacks."""
+
+
+def add_link(con: sqlite3.Connection, chunk: str, commit_id: str, link: bytes) -> None:
+    """Append the chain link of a commit `chunk`'s log applied."""
+    con.execute(
+        "INSERT INTO raft_chain (chunk_id, seq, commit_id, link) VALUES (?, "
+        "(SELECT COALESCE(MAX(seq), 0) + 1 FROM raft_chain WHERE chunk_id = ?), ?, ?)",
+        (chunk, chunk, commit_id, link),
+    )
+
+
+def head(con: sqlite3.Connection, chunk: str) -> bytes | None:
+    """The newest link of `chunk`'s chain, or None before its first commit."""
+    row = con.execute(
+        "SELECT link FROM raft_chain WHERE chunk_id = ? ORDER BY seq DESC LIMIT 1", (chunk,)
+    ).fetchone()
+    return None if row is None else bytes(row[0])
+
+
+def links(con: sqlite3.Connection, chunk: str) -> list[tuple[str, bytes]]:
+    """(commit id, link) of every commit of `chunk`'s chain, oldest first."""
+    return [
+        (commit_id, bytes(link))
+        for commit_id, link in con.execute(
+            "SELECT commit_id, link FROM raft_chain WHERE chunk_id = ? ORDER BY seq", (chunk,)
+        )
+    ]

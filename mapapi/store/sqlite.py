@@ -346,6 +346,20 @@ class SqliteStore:
         with self._write(con):
             raft_sql.set_applied(con, chunk_id, index, time)
 
+    def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
+        """Append a commit's link to the chunk's hash chain (joins `exclusive()`)."""
+        con = self._con()
+        with self._write(con):
+            raft_sql.add_link(con, chunk_id, commit_id, link)
+
+    def chain_head(self, chunk_id: ChunkId) -> bytes | None:
+        """The chunk's newest link, or None."""
+        return raft_sql.head(self._con(), chunk_id)
+
+    def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """Every (commit, link) of the chunk's chain, oldest first."""
+        return [(CommitId(c), link) for c, link in raft_sql.links(self._con(), chunk_id)]
+
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
         return raft_sql.chunk_time(self._con(), chunk_id)

@@ -79,7 +79,7 @@ def _add_raft_tables(db: Connections, con: sqlite3.Connection) -> None:
     """Give a mapapi store written before Raft its group tables (no write
     transaction when they are there: most opens are reads)."""
     tables = _tables_if_ours(con)
-    if tables is None or "raft_state" in tables:
+    if tables is None or tables.issuperset(raft_sql.RAFT_TABLES):
         return  # not ours (check_schema refuses it untouched), or up to date
     with db.write(con):
         for statement in raft_sql.RAFT_SCHEMA.split(";"):

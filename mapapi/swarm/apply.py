@@ -9,6 +9,10 @@ Python objects of one peer; the writer merges and proposes again), and the
 commit rules the application gave at construction (every holder runs the same
 application).
 
+Each commit extends the chunk's hash chain (`core/chain.py`) in the same
+transaction, so holders that applied the same log hold the same head, and a
+store changed behind their back no longer matches its chain (`chain_check`).
+
 The commit's time is the proposal's Lamport time, raised to one past the
 chunk's clock (including commits applied earlier in the same batch) when a
 proposal from before a leader change arrives with an older time: revision times
@@ -20,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from mapapi.core import codec
+from mapapi.core import chain, codec
 from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
@@ -94,10 +98,12 @@ def apply_proposal(
     )
     revisions = build_revisions(accepted, latest, time, proposal.author, record.id)
     store.apply_commit(record, revisions)
+    previous = store.chain_head(chunk) or chain.GENESIS
+    store.chain_link(chunk, record.id, chain.link(previous, chunk, record, revisions))
     return Outcome(record, tuple(revisions))
 
 
-def chunk_clock(store: Store, chunk: ChunkId) -> int:
+def chunk_clock(store: ReplicaStore, chunk: ChunkId) -> int:
     """The newest commit time in the chunk's replica: its recorded clock, or a later
     commit applied earlier in the same transaction (`RaftGroups` records the clock
     once per batch of entries, after them all)."""

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import sqlite3
 from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -13,7 +16,9 @@ from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Isolation, Op
 from mapapi.store.base import Store
 from mapapi.store.memory import MemoryStore
+from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, apply_proposal
+from mapapi.swarm.chain_check import check_chain
 from mapapi.swarm.commit_check import CommitRule
 
 CHUNK = ChunkId.new()
@@ -152,3 +157,43 @@ def test_write_skew_breaks_a_joint_balance_only_under_snapshot_isolation(
     latest = store.latest([a, b])
     total = sum(int(r.data) for r in latest.values())
     assert (total < 0) is skewed
+
+
+def test_every_commit_extends_the_chunks_chain_and_a_changed_payload_is_found(
+    store: MemoryStore,
+) -> None:
+    decide(store, proposal(Op.INSERT, b"0", begin=0, time=1))
+    decide(store, proposal(Op.UPDATE, b"1", begin=1, time=2))
+    assert len(store.chain_links(CHUNK)) == 2
+    assert check_chain(store, CHUNK) == []
+    # a byte flipped on disk: the revision of the first commit changes behind the chain
+    first = store.chain_links(CHUNK)[0][0]
+    (revision,) = store.commit_revisions(first)
+    store.drop_chunk(CHUNK)
+    store.add_chunk(CHUNK, "t")
+    record = store.commit_record(first)
+    assert record is not None
+    store.apply_commit(record, [replace(revision, data=b"\x01")])
+    assert any("no longer matches" in p for p in check_chain(store, CHUNK))
+
+
+def test_a_byte_flipped_in_the_sqlite_file_is_found(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    sq = SqliteStore(path, create=True)
+    sq.add_table("t", "google.protobuf.Struct")
+    sq.add_chunk(CHUNK, "t")
+    sq.raft_save(CHUNK, hard=(1, 0, 1))
+    for p in (proposal(Op.INSERT, b"0", 0, 1), proposal(Op.UPDATE, b"1", 1, 2)):
+        with sq.exclusive():
+            apply_proposal(sq, CHUNK, p)
+    assert check_chain(sq, CHUNK) == []
+    sq.close()
+    con = sqlite3.connect(path)
+    con.execute("UPDATE revisions SET data = x'01' WHERE update_time = 1")
+    con.commit()
+    con.close()
+    again = SqliteStore(path)
+    problems = check_chain(again, CHUNK)
+    again.close()
+    assert len(problems) == 1
+    assert "no longer matches" in problems[0]

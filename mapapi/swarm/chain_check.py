@@ -1,0 +1,36 @@
+"""Does a chunk's stored history still match its hash chain (issue 18 §3)?
+
+Every commit applied from a chunk's log left a link (`core/chain.py`). Checking
+recomputes each link from the commit's record and revisions as stored now: a
+payload changed on disk, a commit gone (a rolled-back file) or a link that does
+not follow from the one before is reported, never repaired silently.
+"""
+
+from __future__ import annotations
+
+from mapapi.core import chain
+from mapapi.core.ids import ChunkId
+from mapapi.store.base import ReplicaStore
+
+
+def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:
+    """What is wrong with `chunk`'s history against its chain; empty when sound."""
+    problems: list[str] = []
+    previous = chain.GENESIS
+    for commit_id, stored in store.chain_links(chunk):
+        record = store.commit_record(commit_id)
+        if record is None:
+            problems.append(
+                f"chunk {chunk.short}: commit {commit_id.short} of its chain is gone "
+                "(the store was rolled back or damaged)"
+            )
+            previous = stored
+            continue
+        revisions = [r for r in store.commit_revisions(commit_id) if r.chunk_id == chunk]
+        if chain.link(previous, chunk, record, revisions) != stored:
+            problems.append(
+                f"chunk {chunk.short}: commit {commit_id.short} no longer matches its link "
+                "(its record or data changed after it was written)"
+            )
+        previous = stored
+    return problems
