@@ -3,30 +3,33 @@
 A peer works alone on its repository until `start()` puts it on the network
 (`Swarm`); from then on every commit goes through the distributed lock and
 reaches every holder. It holds no protocol logic of its own and delegates to
-`commit`, `transaction`, `swarm` and the store.
+`commit`, `transaction`, `swarm` (reads in `reading`, queries by place in
+`placed`) and the store.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import ChunkNotFound, NotParticipatingError, PeerNotRunning, UsageError
+from mapapi.core.errors import ChunkNotFound, NotParticipatingError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.table import TableDescriptor
-from mapapi.core.transaction import Change, Isolation, Transaction
+from mapapi.core.transaction import Isolation, Transaction
 from mapapi.lookup.chunk_places import ChunkPlaces
 from mapapi.lookup.spatial import BBox, SpatialGrid
-from mapapi.lookup.spatial_index import QueryStats, SpatialRef
+from mapapi.lookup.spatial_index import QueryStats
 from mapapi.service.repo import Repository
+from mapapi.service.tables import Tables
 from mapapi.store import ChunkInfo, MemoryStore
 from mapapi.store.base import ReplicaStore
-from mapapi.swarm.commit import commit_distributed, commit_locally
+from mapapi.swarm import reading
+from mapapi.swarm.commit import commit_distributed, commit_locally, refuse_shared
+from mapapi.swarm.placed import Here, PlacedChunk, query_bbox
 from mapapi.swarm.triggers import Callback, Triggers
 
 if TYPE_CHECKING:
@@ -46,16 +49,6 @@ if TYPE_CHECKING:
     from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True, slots=True)
-class PlacedChunk:
-    """A chunk a spatial query found: where it lies, who holds it, and whether
-    this peer does."""
-
-    ref: SpatialRef
-    holders: tuple[Member, ...]
-    held: bool
 
 
 class Peer:
@@ -87,8 +80,7 @@ class Peer:
         self.triggers = Triggers()
         self.clock = LamportClock(store.clock())
         self.swarm: Swarm | None = None
-        self._descriptors: dict[str, TableDescriptor] = {}
-        self._policies: dict[str, MergePolicy] = {}
+        self._tables = Tables(store)
 
     @classmethod
     def open(cls, path: str | Path = ".", *, rules: Sequence[CommitRule] = ()) -> Peer:
@@ -253,37 +245,8 @@ class Peer:
         Raises:
             QueryError: no owner of the box's cells answered.
         """
-        if self.grid.clamp(box) is None:
-            return []
-        found: dict[ChunkId, SpatialRef] = {}
-        if self.swarm is not None and self.swarm.index is not None:
-            for ref in await self.swarm.index.query(box, table, stats=stats):
-                found[ref.chunk] = ref
-        for ref in self.places.placed():  # what is held here is current
-            inside = self.grid.clamp(ref.bbox) is not None  # as the index would have it
-            if inside and ref.bbox.overlaps(box) and table in (None, ref.table):
-                found[ref.chunk] = ref
-        held = {c.id for c in self.store.chunks()}
-        return [self._holders_of(found[c], c in held) for c in sorted(found)]
-
-    def _holders_of(self, ref: SpatialRef, held: bool) -> PlacedChunk:
-        if held:
-            ids = self.store.holders(ref.chunk) or [self.id]
-            return PlacedChunk(ref, tuple(self._member(p) for p in ids), held=True)
-        return PlacedChunk(ref, tuple(self._member(p, a) for p, a in ref.holders), held=False)
-
-    def _member(self, peer: PeerId, address: str | None = None) -> Member:
-        """`peer` with its name when this peer knows it; `address` (where the
-        spatial index says it serves the chunk) replaces the member list's."""
-        from mapapi.net.messages import Member
-
-        if peer == self.id:
-            here = self.swarm.address if self.swarm is not None else ""
-            return Member(self.id, here if address is None else address, self.name)
-        known = self.swarm.members.get(peer) if self.swarm is not None else None
-        if known is None:
-            return Member(peer, address or "")
-        return known if address is None else Member(peer, address, known.name)
+        here = Here(self.id, self.name, self.store, self.places, self.grid, self.swarm)
+        return await query_bbox(here, box, table, stats)
 
     async def __aenter__(self) -> Peer:
         return self
@@ -294,15 +257,7 @@ class Peer:
     # -- tables and chunks --------------------------------------------------
     async def create_table(self, name: str, message_type: str | type[Message]) -> TableDescriptor:
         """Create a table of `message_type` (a class or a full protobuf name)."""
-        if not name or not name.replace("_", "").replace("-", "").replace(".", "").isalnum():
-            raise UsageError(f"bad table name {name!r}: use letters, digits, '_', '-', '.'")
-        if isinstance(message_type, str):
-            descriptor = TableDescriptor.named(name, message_type)
-        else:
-            descriptor = TableDescriptor(name, message_type)
-        self.store.add_table(name, descriptor.type_name)
-        self._descriptors[name] = descriptor
-        return descriptor
+        return self._tables.create(name, message_type)
 
     def tables(self) -> dict[str, TableDescriptor]:
         """Every table of the repository."""
@@ -310,13 +265,7 @@ class Peer:
 
     def table(self, name: str) -> TableDescriptor:
         """One table's descriptor."""
-        descriptor = self._descriptors.get(name)
-        if descriptor is None:
-            type_name = self.store.tables().get(name)
-            if type_name is None:
-                raise UsageError(f"no table {name!r}; create it with `mapctl table create`")
-            descriptor = self._descriptors[name] = TableDescriptor.named(name, type_name)
-        return descriptor
+        return self._tables.get(name)
 
     async def create_chunk(self, table: str) -> ChunkId:
         """A new, empty chunk of `table`, held by this peer (and, on the network,
@@ -350,11 +299,7 @@ class Peer:
 
     def set_merge_policy(self, table: str, policy: MergePolicy | None) -> None:
         """Install (or with None, remove) the auto-merge policy of a table."""
-        self.table(table)
-        if policy is None:
-            self._policies.pop(table, None)
-        else:
-            self._policies[table] = policy
+        self._tables.set_merge_policy(table, policy)
 
     # -- transactions ---------------------------------------------------------
     def now(self) -> int:
@@ -382,32 +327,13 @@ class Peer:
 
     async def read(self, item_id: ItemId, time: int) -> Revision | None:
         """The item at `time`; in a swarm, an item of a chunk not held here is
-        fetched first (its chunk is found by asking the members)."""
-        revision = self.store.read(item_id, time)
-        if self.swarm is None:
-            return revision
-        if revision is None and self.store.item_chunk(item_id) is None:
-            try:
-                found = await self.swarm.replicator.find_holders(item=item_id)
-            except ChunkNotFound:
-                return None
-            if found.chunk is not None:
-                await self.swarm.replicator.participate(found.chunk)
-        chunk = self.store.item_chunk(item_id)
-        if chunk is not None:
-            await self.swarm.locks.wait_readable(chunk)
-        return self.store.read(item_id, time)
+        fetched first (`mapapi.swarm.reading.read`)."""
+        return await reading.read(self.store, self.swarm, item_id, time)
 
     async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
         """Items visible at `time` in a table or chunk; a chunk not held here is
-        fetched first."""
-        if self.swarm is not None:
-            if chunk is not None and chunk not in {c.id for c in self.store.chunks()}:
-                await self.swarm.replicator.participate(chunk)
-            chunks = [chunk] if chunk is not None else [c.id for c in self.store.chunks(table)]
-            for each in chunks:
-                await self.swarm.locks.wait_readable(each)
-        return self.store.scan(time, table=table, chunk=chunk)
+        fetched first (`mapapi.swarm.reading.scan`)."""
+        return await reading.scan(self.store, self.swarm, time, table, chunk)
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply a transaction (see `mapapi.swarm.commit`)."""
@@ -419,12 +345,14 @@ class Peer:
                 tx,
                 message,
                 self.clock,
-                self._try_merge,
+                self._tables.try_merge,
                 after=self._committed,
                 rules=self.rules,
             )
-        self._refuse_shared(tx)
-        done = commit_locally(self.store, tx, message, self.clock, self._try_merge, self.rules)
+        refuse_shared(self.store, self.id, tx)
+        done = commit_locally(
+            self.store, tx, message, self.clock, self._tables.try_merge, self.rules
+        )
         if done.record is not None:
             await self._committed(done.record, done.revisions)
         return done.record
@@ -440,28 +368,6 @@ class Peer:
         self.triggers.applied(record, revisions)
         if self.swarm is not None:
             await self.swarm.subscriptions.notify(record, revisions)
-
-    def _refuse_shared(self, tx: Transaction) -> None:
-        """Alone, a commit may not touch a chunk other peers hold: they would never
-        see it (DESIGN §5: every commit reaches every holder)."""
-        for chunk in sorted({c.chunk_id for c in tx.changes}):
-            if any(p != self.id for p in self.store.holders(chunk)):
-                raise PeerNotRunning(
-                    f"chunk {chunk.short} is shared with other peers; commit through the "
-                    "running peer (`mapctl peer start --join ADDR`)"
-                )
-
-    def _try_merge(self, ours: Change, theirs: Revision, base: Revision | None) -> bytes | None:
-        policy = self._policies.get(ours.table)
-        if policy is None:
-            return None
-        descriptor = self.table(ours.table)
-        merged = policy(
-            None if base is None or base.removed else descriptor.decode(base.data),
-            descriptor.decode(ours.data),
-            descriptor.decode(theirs.data),
-        )
-        return None if merged is None else descriptor.encode(merged)
 
     # -- triggers (DESIGN §8) ------------------------------------------------------
     def on_commit(

@@ -20,6 +20,7 @@ from mapapi.core.errors import (
     ConflictError,
     LockNotHeld,
     LockTimeout,
+    PeerNotRunning,
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
@@ -134,6 +135,21 @@ def commit_locally(
             store.apply_commit(decision.record, decision.revisions)
     tx.committed(decision.revisions)
     return decision
+
+
+def refuse_shared(store: ReplicaStore, me: PeerId, tx: Transaction) -> None:
+    """Alone, a commit may not touch a chunk other peers hold: they would never
+    see it (DESIGN §5: every commit reaches every holder).
+
+    Raises:
+        PeerNotRunning: `tx` changes a chunk that `me` shares with other peers.
+    """
+    for chunk in sorted({c.chunk_id for c in tx.changes}):
+        if any(p != me for p in store.holders(chunk)):
+            raise PeerNotRunning(
+                f"chunk {chunk.short} is shared with other peers; commit through the "
+                "running peer (`mapctl peer start --join ADDR`)"
+            )
 
 
 def _check_confirmed(
