@@ -19,6 +19,7 @@ from mapapi.maps.operations import MapOperations
 from mapapi.maps.rules import map_rules
 from mapapi.service import daemon, daemon_process
 from mapapi.service.control import RemoteOperations
+from mapapi.service.fsck import FsckOperations
 from mapapi.service.ops import DaemonOperations, Operations, RepoOperations
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
@@ -58,6 +59,7 @@ def operations(peer: Peer, *, on_shutdown: Callable[[], None] | None = None) -> 
             WatchOperations(peer),
             MapOperations(peer),
             DaemonOperations(on_shutdown),
+            FsckOperations(peer),
         ),
     )
 

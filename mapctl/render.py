@@ -261,3 +261,15 @@ class ChangeRows:
         )
         console.print(grid)
         self.header_done = True
+
+
+def fsck_report(report: dict[str, Any]) -> None:
+    """`mapctl fsck`: what was checked, then each problem found, in red."""
+    payloads, chains = report["payloads"], report["chains"]
+    line(
+        f"{report['store']}: file {'sound' if not report['integrity'] else 'DAMAGED'}, "
+        f"{payloads['checked']} payload(s), {chains['checked']} chain(s) checked"
+    )
+    for problem in [*report["integrity"], *payloads["bad"], *chains["problems"]]:
+        line(f"  {problem}", "red")
+    line("no problem found" if report["ok"] else "problems found: see above", "bold")

@@ -195,6 +195,9 @@ class ReplicaStore(Store, Protocol):
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log (0 if none)."""
 
+    def integrity(self) -> list[str]:
+        """What is wrong with the store's own structure (empty: nothing found)."""
+
     def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
         """Append a commit's link to the chunk's hash chain (inside `exclusive()`,
         with the commit it stands for)."""

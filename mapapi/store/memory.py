@@ -303,6 +303,10 @@ class MemoryStore:
                 )
             self._raft[chunk_id] = replace(kept, applied=index, time=max(kept.time, time))
 
+    def integrity(self) -> list[str]:
+        """Nothing to check in memory."""
+        return []
+
     def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
         """Append a commit's link to the chunk's hash chain."""
         with self._lock:

@@ -346,6 +346,11 @@ class SqliteStore:
         with self._write(con):
             raft_sql.set_applied(con, chunk_id, index, time)
 
+    def integrity(self) -> list[str]:
+        """SQLite's own check of the file (`PRAGMA quick_check`); empty when sound."""
+        rows = [str(r[0]) for r in self._con().execute("PRAGMA quick_check")]
+        return [] if rows == ["ok"] else [f"{self.path}: {r}" for r in rows]
+
     def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
         """Append a commit's link to the chunk's hash chain (joins `exclusive()`)."""
         con = self._con()

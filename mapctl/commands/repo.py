@@ -201,7 +201,25 @@ def chunk_list(
         render.records("chunks", info["chunks"], ["id", "table", "items"])
 
 
+@click.command("fsck")
+@json_option
+@pass_session
+def fsck(session: Session, as_json: bool) -> None:
+    """Check the store: the SQLite file, every payload, every chunk's hash chain.
+
+    Exits 1 when anything is wrong (after the report), 0 when all is sound."""
+    from mapctl import render
+
+    report = session.call("fsck")
+    if as_json:
+        render.emit_json(report)
+    else:
+        render.fsck_report(report)
+    if not report["ok"]:
+        raise SystemExit(1)
+
+
 def register(cli: click.Group) -> None:
     """Add this module's commands to `cli`."""
-    for command in (init, table, chunk):
+    for command in (init, table, chunk, fsck):
         cli.add_command(command)

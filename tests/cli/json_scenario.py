@@ -76,6 +76,7 @@ def run_offline(out: Outputs, root: Path) -> Path:
     out.run(("log",), repo=repo)
     out.run(("log",), "counters", counter["id"], repo=repo)
     out.run(("show",), record["commit"], repo=repo)
+    out.run(("fsck",), repo=repo)
     out.run(("table", "list"), repo=repo)
     out.run(("chunk", "list"), repo=repo)
     _conflict(out, repo, point["id"])
