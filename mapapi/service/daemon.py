@@ -195,7 +195,8 @@ async def _go_live(
     """Start the peer, join (through `join`, or else the members it knew when it
     last ran), serve the control endpoint, write the pid file."""
     peer = control.ops.peer
-    bound = await peer.start(listen, lease=lease)
+    bound = await peer.start(known_peers.preferred_listen(repo, listen), lease=lease)
+    known_peers.remember_listen(repo, bound)
     assert peer.swarm is not None
     recalled = [] if join else known_peers.recall(repo)
     wanted = advertise or advertised_address(bound, join or recalled)

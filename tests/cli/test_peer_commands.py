@@ -13,6 +13,7 @@ import asyncio
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -318,6 +319,26 @@ class TestDetached:
         assert stopped.returncode == 0, stopped.stderr
         assert stopped.stdout.strip() == f"stopped peer bench (pid {record.pid})"
         assert Repository.find(detached).read_peer_record() is None
+
+    def test_a_restarted_peer_listens_where_it_did_when_that_port_is_free(
+        self, detached: Path
+    ) -> None:
+        """So the others' remembered address of it stays right through a restart of
+        the whole swarm; a taken port falls back to a new one."""
+        first = _mapctl("-C", str(detached), "peer", "start", "--detach")
+        assert first.returncode == 0, first.stderr
+        assert _mapctl("-C", str(detached), "peer", "stop").returncode == 0
+        second = _mapctl("-C", str(detached), "peer", "start", "--detach")
+        assert second.returncode == 0, second.stderr
+        assert second.stdout.strip() == first.stdout.strip()
+        assert _mapctl("-C", str(detached), "peer", "stop").returncode == 0
+        port = int(first.stdout.strip().rsplit(":", 1)[1])
+        with socket.socket() as squatter:
+            squatter.bind(("127.0.0.1", port))
+            squatter.listen()
+            third = _mapctl("-C", str(detached), "peer", "start", "--detach")
+            assert third.returncode == 0, third.stderr
+            assert third.stdout.strip() != first.stdout.strip()
 
     def test_a_failed_start_reports_the_cause(self, detached: Path) -> None:
         done = _mapctl(
