@@ -47,6 +47,9 @@ MAX_ATTEMPTS = 5
 """Tries of one client operation that keeps conflicting."""
 AMOUNT = 30
 """What one transfer moves."""
+IN_FLIGHT = 4
+"""New client operations wait while this many proposals wait for their outcome (retries
+do not): writers are a few robots, each waiting for its commit, not an open stream."""
 ENVELOPE_EVERY = 8
 """One message in this many (and every snapshot) goes through the envelope codec."""
 
@@ -173,7 +176,7 @@ class CommitWorkload:
         self.ops: dict[int, ClientOp] = {}
         self.attempts: dict[CommitId, tuple[ClientOp, int]] = {}  # commit -> (op, try)
         self.conflicted: set[CommitId] = set()
-        self.declined = self.gave_up = self.stale = self.sent = 0
+        self.declined = self.gave_up = self.stale = self.sent = self.busy = 0
 
     def new_disk(self, nid: int, config: Config | None) -> NodeDisk:
         """The node's store, with the chunk's genesis and the group's state."""
@@ -192,7 +195,10 @@ class CommitWorkload:
         return wire(m, envelope=m.snapshot is not None or self.sent % ENVELOPE_EVERY == 0)
 
     def client(self, node: SimNode) -> None:
-        """Begin a new increment or transfer at `node`."""
+        """Begin a new increment or transfer at `node`, unless `IN_FLIGHT` are waiting."""
+        if sum(map(len, self.sim.pending.values())) >= IN_FLIGHT:
+            self.busy += 1
+            return
         rng = self.sim.rng
         n = len(self.ops) + 1
         if rng.random() < 0.5:
@@ -328,6 +334,7 @@ class CommitWorkload:
             "gave_up": self.gave_up,
             "stale_reads": self.stale,
             "declined": self.declined,
+            "busy": self.busy,
         }
 
 
