@@ -208,6 +208,12 @@ class ReplicaStore(Store, Protocol):
     def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
         """Every (commit, link) of the chunk's chain, oldest first."""
 
+    def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
+        """The link of the chunk's `seq`-th commit (from 1), or None if it has fewer."""
+
+    def chain_length(self, chunk_id: ChunkId) -> int:
+        """How many commits the chunk's chain links."""
+
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""
 

@@ -323,6 +323,17 @@ class MemoryStore:
         with self._lock:
             return list(self._chains.get(chunk_id, []))
 
+    def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
+        """The link of the chunk's `seq`-th commit, or None."""
+        with self._lock:
+            chain = self._chains.get(chunk_id, [])
+            return chain[seq - 1][1] if 0 < seq <= len(chain) else None
+
+    def chain_length(self, chunk_id: ChunkId) -> int:
+        """How many commits the chunk's chain links."""
+        with self._lock:
+            return len(self._chains.get(chunk_id, []))
+
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
         with self._lock:

@@ -169,3 +169,17 @@ def links(con: sqlite3.Connection, chunk: str) -> list[tuple[str, bytes]]:
             "SELECT commit_id, link FROM raft_chain WHERE chunk_id = ? ORDER BY seq", (chunk,)
         )
     ]
+
+
+def link_at(con: sqlite3.Connection, chunk: str, seq: int) -> bytes | None:
+    """The link of `chunk`'s `seq`-th commit (from 1), or None if it has fewer."""
+    row = con.execute(
+        "SELECT link FROM raft_chain WHERE chunk_id = ? AND seq = ?", (chunk, seq)
+    ).fetchone()
+    return None if row is None else bytes(row[0])
+
+
+def length(con: sqlite3.Connection, chunk: str) -> int:
+    """How many commits `chunk`'s chain links."""
+    row = con.execute("SELECT MAX(seq) FROM raft_chain WHERE chunk_id = ?", (chunk,)).fetchone()
+    return int(row[0] or 0)

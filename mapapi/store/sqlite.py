@@ -365,6 +365,14 @@ class SqliteStore:
         """Every (commit, link) of the chunk's chain, oldest first."""
         return [(CommitId(c), link) for c, link in raft_sql.links(self._con(), chunk_id)]
 
+    def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
+        """The link of the chunk's `seq`-th commit, or None."""
+        return raft_sql.link_at(self._con(), chunk_id, seq)
+
+    def chain_length(self, chunk_id: ChunkId) -> int:
+        """How many commits the chunk's chain links."""
+        return raft_sql.length(self._con(), chunk_id)
+
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
         return raft_sql.chunk_time(self._con(), chunk_id)

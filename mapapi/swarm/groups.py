@@ -176,6 +176,17 @@ class RaftGroups:
         group = self._groups.get(chunk)
         return group is not None and group.role is Role.LEADER
 
+    def led(self) -> list[ChunkId]:
+        """The chunks whose group this peer leads now."""
+        return [c for c, g in self._groups.items() if g.role is Role.LEADER]
+
+    def members(self, chunk: ChunkId) -> list[PeerId]:
+        """The other members of the chunk's group (voters and learners) that this
+        peer can name."""
+        group = self._group(chunk)
+        peers = (self._peer(n) for n in group.node.config.members if n != node_id(self.me))
+        return [p for p in peers if p is not None]
+
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
         kept = self.store.raft_load(chunk)

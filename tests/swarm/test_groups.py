@@ -8,6 +8,7 @@ every peer applied (one history per chunk) and wait for exactly the event they n
 from __future__ import annotations
 
 import asyncio
+import sqlite3
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, applier
+from mapapi.swarm.chain_check import ChainWatch
 from mapapi.swarm.groups import Applied, NotChunkLeader, RaftGroups
 from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
@@ -373,3 +375,31 @@ async def test_a_follower_catches_up_before_a_fresh_read(world: World) -> None:
     index = await follower.groups.catch_up(CHUNK)
     assert follower.groups.applied(CHUNK) >= index
     assert follower.applied[CHUNK] == [b"fresh"]  # no waiting on our side: catch_up did
+
+
+# -- holders compare their histories ----------------------------------------------------
+async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
+    nodes = [await world.add(kind=Ledger) for _ in range(3)]
+    for node in nodes:
+        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_chunk(CHUNK, "counters")
+        node.groups.found(CHUNK, [n.id for n in nodes])
+    leader = await leader_of(nodes, CHUNK)
+    clock = LamportClock()
+    first = Change(Op.INSERT, "counters", COUNTER, CHUNK, b"1")
+    start = Proposal(
+        CommitId.new(), clock.tick(), leader.id, "w", "", "a0", 0, "snapshot", (first,)
+    )
+    await leader.groups.propose(CHUNK, codec.encode_proposal(start))
+    healthy, damaged = (n for n in nodes if n is not leader)
+    for node in (healthy, damaged):
+        await node.wait(lambda node=node: node.store.chain_length(CHUNK) == 1)
+    con = sqlite3.connect(damaged.path)  # another history, as a rolled-back store would hold
+    con.execute("UPDATE raft_chain SET link = ? WHERE seq = 1", (b"\x01" * 32,))
+    con.commit()
+    con.close()
+    watches = {n.id: ChainWatch(n.groups, n.rpc, world.addresses.__getitem__) for n in nodes}
+    watches[leader.id].announce()
+    await damaged.wait(lambda: CHUNK in watches[damaged.id].diverged)
+    assert "another history" in watches[damaged.id].diverged[CHUNK]
+    assert watches[healthy.id].diverged == {}

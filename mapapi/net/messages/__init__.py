@@ -64,6 +64,7 @@ from mapapi.net.messages.peers import (
     Welcome,
 )
 from mapapi.net.messages.raft import (
+    ChainHead,
     RaftBatch,
     RaftEntry,
     RaftMessage,
@@ -84,6 +85,7 @@ __all__ = [
     "SWARM_BODIES",
     "Ack",
     "Bye",
+    "ChainHead",
     "ChordAdd",
     "ChordEntry",
     "ChordFindSuccessor",

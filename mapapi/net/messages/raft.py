@@ -69,9 +69,19 @@ class RaftProposed:
     revisions: tuple[Revision, ...]
 
 
+@dataclass(frozen=True, slots=True)
+class ChainHead:
+    """The leader's hash-chain link of the chunk's `count`-th commit (for comparison)."""
+
+    chunk: ChunkId
+    count: int
+    link: bytes
+
+
 BODIES: dict[str, type] = {
     "raft_batch": RaftBatch,
     "raft_propose": RaftPropose,
     "raft_proposed": RaftProposed,
+    "chain_head": ChainHead,
 }
 """Envelope body field -> class, for the messages of this area."""
