@@ -1,8 +1,11 @@
 """Every size and count limit a peer enforces on input, in one place (DESIGN §11).
 
-A peer refuses what exceeds a limit before it allocates for it: a frame over
-`MAX_MESSAGE_BYTES` is dropped by the transport (and zmq itself cuts the
-connection at twice that, `zmq.MAXMSGSIZE`); a repeated field, a string or a
+A peer refuses what exceeds a limit before it allocates for it: a message over
+`MAX_MESSAGE_BYTES` is dropped by the transport; a message over `FRAME_BYTES`
+travels as parts of that size, and zmq itself cuts a connection that sends one
+frame over twice `FRAME_BYTES` (`zmq.MAXMSGSIZE`, checked on the frame's header,
+before it allocates); the parts being reassembled hold at most
+`MAX_BUFFERED_BYTES` in all (`mapapi.net.parts`); a repeated field, a string or a
 bytes field over its limit fails the decoding of its message, before one
 dataclass of it is built; numbers out of range (a Lamport time near 2**64, a
 time-to-live of 10**12 s, NaN) are refused where they are read. Each refusal
@@ -23,7 +26,24 @@ import re
 from mapapi.core.errors import LimitExceeded
 
 MAX_MESSAGE_BYTES = 64 * 1024 * 1024
-"""One message (frame) on the swarm's port; the transport drops larger ones."""
+"""One message on the swarm's port; the transport drops larger ones."""
+
+FRAME_BYTES = 1024 * 1024
+"""The largest zmq frame a peer sends: a larger message goes as parts of this
+size. A small frame keeps what libzmq buffers per connection small: it holds a
+frame whole before handing it over, up to `RECEIVE_QUEUE` of them."""
+
+RECEIVE_QUEUE = 16
+"""Frames libzmq queues per inbound connection (`zmq.RCVHWM`) before it stops
+reading that connection's socket (TCP then slows the sender, nothing is lost)."""
+
+MAX_BUFFERED_BYTES = 96 * 1024 * 1024
+"""Bytes of partly received messages a peer holds in all; a transfer that would
+go beyond is refused (one message of `MAX_MESSAGE_BYTES` always fits)."""
+
+STALLED_TRANSFER_S = 30.0
+"""A partly received message with no new part for this long gives its share of
+`MAX_BUFFERED_BYTES` to a new transfer that needs it."""
 
 MAX_LAMPORT = 1 << 62
 """The largest Lamport time accepted from the wire, on an envelope, a revision or

@@ -1,7 +1,8 @@
 """CurveZMQ on the transport's sockets (DESIGN §10): pyzmq's `zmq.auth`, no crypto here.
 
 - `ZapHandler` answers libzmq's ZAP requests for a secure ROUTER: a client is
-  admitted when its public key is on the peer's trust list (or is the peer's own).
+  admitted when its public key is on the peer's trust list (or is the peer's own),
+  and its key becomes the connection's User-Id, which every message carries.
 - `secure_router` and `secure_dealer` set the CURVE socket options; a DEALER names
   the server key it expects, taken from the remote's address, so it also checks
   that the peer it reaches holds that key.
@@ -78,6 +79,16 @@ class ZapHandler(zmq.auth.Authenticator):
             answered = self.handle_zap_message(request)
             if inspect.isawaitable(answered):  # a coroutine since pyzmq 25 (not before)
                 await answered
+
+    def curve_user_id(self, client_public_key: bytes) -> str:
+        """The ZAP User-Id of an admitted client: its public key in hex. libzmq
+        attaches it to every message of the connection, where the transport reads
+        it (`zmq.Frame.get("User-Id")`) to check each message's sender against
+        the key (docs/design.md "Secure swarm")."""
+        from zmq.utils import z85
+
+        key = client_public_key if len(client_public_key) == 32 else z85.decode(client_public_key)
+        return key_text(key)
 
     def callback(self, domain: str, z85_key: bytes) -> bool:
         """zmq.auth's credentials provider: is this client key trusted?"""

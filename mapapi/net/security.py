@@ -11,10 +11,18 @@ everything that carries an address (Welcome lists, holder sets, the Chord ring,
 the join string) also carries what is needed to authenticate the peer there.
 Keys are written as 64 hex digits (safe to paste into a shell); the 40-character
 Z85 form that zmq tools print is accepted too.
+
+The key is the identity (docs/design.md "Secure swarm"): a secure peer's id is
+`peer_id_of` its public key, so any peer can tell which id a connection's key
+may speak as without asking anyone. A repository made secure before ids were
+derived keeps its id; its key is then bound to that id on every other peer's
+trust list (a line `KEY ID`, `mapctl trust add KEY --id ID`).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import logging
 import os
 import re
@@ -23,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mapapi.core.errors import CorruptRepoError, UsageError
+from mapapi.core.ids import PeerId
 
 log = logging.getLogger(__name__)
 
@@ -36,7 +45,9 @@ ADDRESS_KEY = "#curve="
 _HEX_KEY = re.compile(r"[0-9a-fA-F]{64}")
 _Z85_KEY = re.compile(r"[0-9a-zA-Z.\-:+=^!/*?&<>()\[\]{}@%$#]{40}")
 _TRUST_HEADER = (
-    "# Public keys this peer trusts, one per line (`mapctl trust add|remove KEY`).\n"
+    "# Public keys this peer trusts, one per line (`mapctl trust add|remove KEY`),\n"
+    "# each optionally followed by the peer id it is bound to (a key's id is\n"
+    "# derived from the key otherwise).\n"
     "# A secure peer accepts connections only from these keys and its own, and\n"
     "# connects only to peers whose address names one of them.\n"
 )
@@ -81,6 +92,17 @@ def split_address(address: str) -> tuple[str, bytes | None]:
     if not _HEX_KEY.fullmatch(key):
         raise UsageError(f"bad key in the address {address!r}: expected {ADDRESS_KEY}<64 hex>")
     return endpoint, bytes.fromhex(key)
+
+
+_ID_DOMAIN = b"mapapi peer id v1\x00"  # so the digest means nothing but "the id of this key"
+
+
+@functools.lru_cache(maxsize=4_096)  # checked on every message of a secure peer
+def peer_id_of(key: bytes) -> PeerId:
+    """The peer id a public key speaks as: the first 16 bytes of SHA-256 over a
+    domain tag and the key. Nobody can choose a key for a given id (that needs a
+    second preimage of SHA-256 truncated to 128 bits), so an id names one key."""
+    return PeerId.from_bytes(hashlib.sha256(_ID_DOMAIN + key).digest()[:16])
 
 
 # -- the keypair --------------------------------------------------------------------------
@@ -149,7 +171,9 @@ def load_keys(folder: Path) -> KeyPair:
 
 # -- the trust list -------------------------------------------------------------------------
 class TrustList:
-    """The public keys a peer trusts, in a text file (one hex key per line).
+    """The public keys a peer trusts, in a text file: one hex key per line, each
+    optionally followed by the peer id bound to it (for a peer whose id is not
+    derived from its key, see `peer_id_of`).
 
     Reads go through `current()`, which reloads the file whenever it changed on disk,
     so `mapctl trust add` reaches a running peer at its next handshake. Writes
@@ -159,62 +183,78 @@ class TrustList:
     def __init__(self, path: Path) -> None:
         self.path = path
         self._seen: tuple[int, int, int] | None = None
+        self._bound: dict[bytes, PeerId | None] = {}
         self._keys: frozenset[bytes] = frozenset()
 
     def current(self) -> frozenset[bytes]:
         """The trusted keys (an absent file trusts none).
 
         Raises:
-            CorruptRepoError: a line is not a key.
+            CorruptRepoError: a line is not a key (and an optional peer id).
         """
         try:
             info = self.path.stat()
         except FileNotFoundError:
-            self._seen, self._keys = None, frozenset()
+            self._seen, self._bound, self._keys = None, {}, frozenset()
             return self._keys
         seen = (info.st_ino, info.st_mtime_ns, info.st_size)
         if seen != self._seen:
-            self._keys = self._read()
+            self._bound = self._read()
+            self._keys = frozenset(self._bound)
             self._seen = seen
         return self._keys
+
+    def bound_id(self, key: bytes) -> PeerId | None:
+        """The peer id the trust list binds `key` to, if any."""
+        self.current()
+        return self._bound.get(key)
 
     def __contains__(self, key: object) -> bool:
         return key in self.current()
 
-    def add(self, key: bytes) -> bool:
-        """Trust `key`; False if it was trusted already."""
-        keys = self.current()
-        if key in keys:
+    def add(self, key: bytes, peer_id: PeerId | None = None) -> bool:
+        """Trust `key` (bound to `peer_id` when given); False if it was trusted
+        already with the same binding."""
+        self.current()
+        if key in self._bound and self._bound[key] == peer_id:
             return False
-        self._write(keys | {key})
+        self._write({**self._bound, key: peer_id})
         return True
 
     def remove(self, key: bytes) -> bool:
         """Stop trusting `key`; False if it was not trusted."""
-        keys = self.current()
-        if key not in keys:
+        self.current()
+        if key not in self._bound:
             return False
-        self._write(keys - {key})
+        self._write({k: v for k, v in self._bound.items() if k != key})
         return True
 
     def create(self) -> None:
         """Write an empty trust list (a new secure repository's)."""
-        self._write(frozenset())
+        self._write({})
 
-    def _read(self) -> frozenset[bytes]:
-        keys: set[bytes] = set()
+    def _read(self) -> dict[bytes, PeerId | None]:
+        bound: dict[bytes, PeerId | None] = {}
         text = self.path.read_text(encoding="utf-8")
         for number, line in enumerate(text.splitlines(), 1):
-            entry = line.split("#", 1)[0].strip()
-            if not entry:
+            fields = line.split("#", 1)[0].split()
+            if not fields:
                 continue
-            if not _HEX_KEY.fullmatch(entry):
-                raise CorruptRepoError(f"{self.path} line {number} is not a key: {entry!r}")
-            keys.add(bytes.fromhex(entry))
-        return frozenset(keys)
+            if len(fields) > 2 or not _HEX_KEY.fullmatch(fields[0]):
+                raise CorruptRepoError(
+                    f"{self.path} line {number} is not a key (and a peer id): {line.strip()!r}"
+                )
+            try:
+                peer_id = PeerId(fields[1]) if len(fields) == 2 else None
+            except ValueError as exc:
+                raise CorruptRepoError(f"{self.path} line {number}: {exc}") from None
+            bound[bytes.fromhex(fields[0])] = peer_id
+        return bound
 
-    def _write(self, keys: frozenset[bytes]) -> None:
-        body = "".join(f"{key_text(k)}\n" for k in sorted(keys))
+    def _write(self, bound: dict[bytes, PeerId | None]) -> None:
+        body = "".join(
+            f"{key_text(k)}{'' if bound[k] is None else f' {bound[k]}'}\n" for k in sorted(bound)
+        )
         tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.tmp")
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w", encoding="utf-8") as out:
@@ -225,14 +265,43 @@ class TrustList:
 # -- what the transport needs -----------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class Security:
-    """A secure peer's keypair and trust list, as its transport uses them."""
+    """A secure peer's keypair and trust list, as its transport uses them.
+
+    Attributes:
+        keys: the keypair.
+        trust: the trust list.
+        own_id: the id this peer speaks as when it is not derived from its key
+            (a repository made secure before ids were; None: `peer_id_of` the key).
+    """
 
     keys: KeyPair
     trust: TrustList
+    own_id: PeerId | None = None
+
+    @property
+    def peer_id(self) -> PeerId:
+        """The id this peer's key speaks as: every message it sends carries it."""
+        return self.own_id if self.own_id is not None else peer_id_of(self.keys.public)
 
     def trusts(self, key: bytes) -> bool:
         """True for the peer's own key and every key on its trust list."""
         return key == self.keys.public or key in self.trust
+
+    def id_of(self, key: bytes) -> PeerId:
+        """The only id a connection authenticated with `key` may send as: this
+        peer's for its own key, the id the trust list binds to it, or the one
+        derived from it."""
+        if key == self.keys.public:
+            return self.peer_id
+        bound = self.trust.bound_id(key)
+        return bound if bound is not None else peer_id_of(key)
+
+    def speaks_as(self, key: bytes, peer_id: PeerId) -> bool:
+        """Whether a connection authenticated with `key` may send as `peer_id`:
+        the id derived from the key, or the one bound to it (`id_of`)."""
+        if peer_id == peer_id_of(key):
+            return True  # the common case, without reading the trust list
+        return peer_id == self.id_of(key)
 
     @classmethod
     def create(cls, meta_dir: Path) -> Security:
@@ -244,14 +313,17 @@ class Security:
         return cls(keys, trust)
 
     @classmethod
-    def load(cls, meta_dir: Path) -> Security:
-        """The keypair and trust list of the repository at `meta_dir`.
+    def load(cls, meta_dir: Path, peer_id: PeerId | None = None) -> Security:
+        """The keypair and trust list of the repository at `meta_dir`, whose
+        configured id is `peer_id` (None: the one derived from its key).
 
         Raises:
             CorruptRepoError: the keypair is missing or exposed.
         """
         folder = key_folder(meta_dir)
-        return cls(load_keys(folder), TrustList(folder / TRUST_FILE))
+        keys = load_keys(folder)
+        own = peer_id if peer_id is not None and peer_id != peer_id_of(keys.public) else None
+        return cls(keys, TrustList(folder / TRUST_FILE), own)
 
 
 def own_address(address: str, security: Security | None) -> str:

@@ -6,16 +6,21 @@ ROUTER to the requesting DEALER. Each socket has one reader task that drains it
 in batches (one awaited receive, then non-blocking receives until empty), decodes
 and hands messages to a `Sink` (the RPC layer) without awaiting anything.
 
-This module is the one place that stamps the Lamport clock: `tick()` on every
-send, `merge()` on every decoded receive (DESIGN §4), refusing a time more than
-`limits.MAX_CLOCK_JUMP` ahead of the clock. It also counts traffic,
-applies optional link shaping and drops malformed or oversized input, answering
-it with an ErrorReply when the request id can be recovered (DESIGN §11).
+This module stamps the Lamport clock: `tick()` on every send; what arrives goes
+through `mapapi.net.inbound.Receiver`, which merges it (DESIGN §4), counts it,
+drops malformed, oversized and forged input, answering it with an ErrorReply
+when the request id can be recovered (DESIGN §11). A message over
+`limits.FRAME_BYTES` leaves as parts (`mapapi.net.parts`); every socket caps a
+frame at twice that and queues few per connection, so memory stays bounded
+whatever strangers send (issue 18 §5).
 
 With a `Security` the sockets speak CurveZMQ (`mapapi.net.curve`, DESIGN §10):
 the ROUTER admits trusted keys only, the address carries the public key
 (`tcp://HOST:PORT#curve=KEY`), and each DEALER checks the key of the peer it
-reaches. Every new DEALER (`mapapi.net.links`), secure or not, has a handshake
+reaches. A secure transport sends as the id its key speaks as
+(`Security.peer_id`) and refuses a message whose sender is another: the ROUTER
+reads the key of each message's connection from the ZAP User-Id that
+`curve.ZapHandler` gives it. Every new DEALER (`mapapi.net.links`), secure or not, has a handshake
 monitor until its first handshake completes, so a link that can never work (a
 refused key, a secure peer and an open one) fails its requests with
 `AccessRefused` at once instead of timing out; it costs a few events per new
@@ -27,7 +32,6 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass
 from typing import Any, Protocol, cast
 
 import zmq
@@ -35,18 +39,14 @@ import zmq.asyncio
 
 from mapapi.core import limits
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import (
-    AccessRefused,
-    LimitExceeded,
-    NetworkError,
-    PeerUnavailable,
-    ProtocolError,
-)
+from mapapi.core.errors import AccessRefused, NetworkError, PeerUnavailable, ProtocolError
 from mapapi.core.ids import PeerId
-from mapapi.net import codec, curve
+from mapapi.net import codec, curve, parts
 from mapapi.net.codec import Envelope, ErrorReply, Kind
+from mapapi.net.inbound import Inbound, Receiver, Route, Sink
 from mapapi.net.links import Link
-from mapapi.net.security import Security, keyed_address
+from mapapi.net.outbound import Outbox
+from mapapi.net.security import Security, keyed_address, split_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.stats import Stats
 
@@ -58,42 +58,10 @@ DEFAULT_MAX_MESSAGE_SIZE = limits.MAX_MESSAGE_BYTES
 _BATCH = 256  # messages drained per wake-up before other tasks get a turn
 # plain ints: pyzmq's IntFlag arithmetic costs a microsecond per message
 _EVENTS, _POLLIN, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.NOBLOCK)
-_HARD_LIMIT_FACTOR = 2  # libzmq disconnects senders beyond this multiple of the max
+_HARD_LIMIT_FACTOR = 2  # libzmq disconnects senders of a frame beyond this multiple
+_USER_ID = "User-Id"  # the ZAP user id of a message's connection: its key, in hex
 
-
-@dataclass(frozen=True, slots=True)
-class Route:
-    """Where the reply to an inbound request goes: a ROUTER routing id."""
-
-    routing_id: bytes
-    peer: str  # the stats key of the remote: its PeerId, or "?<routing id>" if unknown
-
-
-@dataclass(frozen=True, slots=True)
-class Inbound:
-    """A decoded message handed to the sink.
-
-    Requests and notifications carry the `route` to reply on; replies carry the
-    `address` of the link they came back on.
-    """
-
-    envelope: Envelope
-    route: Route | None
-    address: str | None
-    size: int
-
-
-class Sink(Protocol):
-    """Receives what the transport decodes; must not block (it runs in a reader)."""
-
-    def on_message(self, msg: Inbound) -> None:
-        """A decoded, clock-merged message."""
-
-    def on_broken_reply(self, address: str, request_id: int, error: ProtocolError) -> None:
-        """A reply for `request_id` arrived from `address` but could not be decoded."""
-
-    def on_link_refused(self, address: str, error: AccessRefused) -> None:
-        """The link to `address` can never work (see `mapapi.net.curve.LinkWatch`)."""
+__all__ = ["DEFAULT_MAX_MESSAGE_SIZE", "Inbound", "Route", "Sink", "Transport", "ZmqTransport"]
 
 
 class Transport(Protocol):
@@ -130,7 +98,9 @@ class ZmqTransport:
     """The `Transport` over pyzmq with `zmq.asyncio` (STYLE §5).
 
     Args:
-        peer_id: this peer, written into every envelope's `sender`.
+        peer_id: this peer, written into every envelope's `sender`; a secure
+            transport sends as the id its key speaks as (`Security.peer_id`),
+            which is `peer_id` for a peer (an ephemeral client gets its owner's).
         clock: the peer's Lamport clock (a fresh one if omitted).
         context: a zmq.asyncio context to share; by default the transport owns one.
         max_message_size: larger messages are dropped and counted.
@@ -148,20 +118,24 @@ class ZmqTransport:
         shaper: Shaper | None = None,
         security: Security | None = None,
     ) -> None:
-        self.peer_id = peer_id
+        # Identity is the key (docs/design.md "Secure swarm"): others accept from
+        # this key only the id it speaks as, so that is the one to send.
+        self.peer_id = security.peer_id if security is not None else peer_id
         self.security = security
         self.clock = clock or LamportClock()
         self.stats = Stats()
         self.shaper = shaper
         self.max_message_size = max_message_size
+        self._outbox = Outbox(self.stats, min(limits.FRAME_BYTES, max_message_size), shaper)
+        self._receiver = Receiver(
+            self.peer_id, self.clock, self.stats, max_message_size, security, self.reply
+        )
         self._context = context
         self._owns_context = context is None
         self._router: zmq.asyncio.Socket | None = None
         self._dealers: dict[str, Link] = {}
         self._zap: curve.ZapHandler | None = None
         self._readers: set[asyncio.Task[None]] = set()
-        self._timers: set[asyncio.TimerHandle] = set()
-        self._sink: Sink | None = None
         self._address: str | None = None
         self._closed = False
 
@@ -180,7 +154,12 @@ class ZmqTransport:
 
     def set_sink(self, sink: Sink) -> None:
         """Where decoded messages go (the RPC layer); set before `start`."""
-        self._sink = sink
+        self._receiver.sink = sink
+
+    @property
+    def parts(self) -> parts.Reassembly:
+        """The messages being received as parts, and their budget."""
+        return self._receiver.parts
 
     async def start(self, bind: str = "tcp://127.0.0.1:0") -> str:
         """Bind the ROUTER and start reading.
@@ -216,7 +195,11 @@ class ZmqTransport:
         if self.security is not None:
             endpoint = keyed_address(endpoint, self.security.keys.public)
         self._address = endpoint
-        self._spawn(self._read(router, self._on_router_frames), f"router {self._address}")
+        if self.security is None:
+            self._spawn(self._read(router, self._receiver.on_router), f"router {self._address}")
+        else:  # frames, not bytes: each carries the key of its connection
+            reader = self._read(router, self._on_secure_router_frames, copy=False)
+            self._spawn(reader, f"router {self._address}")
         log.debug("peer %s listening on %s", self.peer_id.short, self._address)
         return self._address
 
@@ -236,7 +219,7 @@ class ZmqTransport:
                 f"message of {len(data)} bytes exceeds the limit of {self.max_message_size}",
                 advice="act: send less at once (split the commit or the import)",
             )
-        self._out(self._dealer(address), [data], address, codec.body_name(body), len(data))
+        self._outbox.send(self._dealer(address), data, address, codec.body_name(body))
 
     def reply(self, route: Route, request_id: int, body: object) -> None:
         """Answer a request on the ROUTER (never waits; dropped by zmq if the peer left).
@@ -250,8 +233,7 @@ class ZmqTransport:
         if len(data) > self.max_message_size:
             body = ErrorReply(ProtocolError.code, f"reply of {len(data)} bytes is too large")
             data = self._stamp(Kind.REPLY, request_id, body)
-        frames = [route.routing_id, data]
-        self._out(self._router, frames, route.peer, codec.body_name(body), len(data))
+        self._outbox.send(self._router, data, route.peer, codec.body_name(body), [route.routing_id])
 
     async def forget(self, address: str) -> None:
         """Close the link to `address` (a peer that left); a later send reopens it."""
@@ -267,9 +249,8 @@ class ZmqTransport:
         if self._closed:
             return
         self._closed = True
-        for handle in self._timers:
-            handle.cancel()
-        self._timers.clear()
+        self._receiver.closed = True
+        self._outbox.cancel()
         readers = list(self._readers)
         for task in readers:
             task.cancel()
@@ -295,8 +276,11 @@ class ZmqTransport:
         assert self._context is not None
         sock = self._context.socket(kind)
         sock.setsockopt(zmq.LINGER, 0)
-        # A hard cap against memory exhaustion; below it we drop and count ourselves.
-        sock.setsockopt(zmq.MAXMSGSIZE, self.max_message_size * _HARD_LIMIT_FACTOR)
+        # Hard caps against memory exhaustion (issue 18 §5): libzmq refuses a larger
+        # frame on its header, before allocating it, and queues few frames per
+        # connection; below them the receiver drops and counts.
+        sock.setsockopt(zmq.MAXMSGSIZE, self._outbox.frame_bytes * _HARD_LIMIT_FACTOR)
+        sock.setsockopt(zmq.RCVHWM, limits.RECEIVE_QUEUE)
         return sock
 
     def _dealer(self, address: str) -> zmq.asyncio.Socket:
@@ -310,9 +294,12 @@ class ZmqTransport:
             # close the oldest link rather than run out of file descriptors.
             self._close_link(next(iter(self._dealers)))
         link = Link.open(lambda: self._socket(zmq.DEALER), address, self.security)
+        key = split_address(address)[1] if self.security is not None else None
         link.tasks = (
             self._spawn(
-                self._read(link.sock, lambda frames: self._on_dealer_frames(address, frames)),
+                self._read(
+                    link.sock, lambda frames: self._receiver.on_dealer(address, frames, key)
+                ),
                 f"dealer {address}",
             ),
             self._spawn(
@@ -333,8 +320,9 @@ class ZmqTransport:
                 if task is not asyncio.current_task():
                     task.cancel()
             link.close()
-        if self._sink is not None:
-            self._sink.on_link_refused(address, error)
+        self._receiver.parts.forget(address)
+        if self._receiver.sink is not None:
+            self._receiver.sink.on_link_refused(address, error)
 
     def _serve_zap(self, context: zmq.asyncio.Context, security: Security) -> None:
         zap = curve.ZapHandler(context, security)
@@ -354,48 +342,6 @@ class ZmqTransport:
             link.close()
         log.debug("closed the link to %s (more than %d links)", address, limits.MAX_LINKS)
 
-    def _out(
-        self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
-    ) -> None:
-        if self.shaper is not None:
-            loop = asyncio.get_running_loop()
-            at = self.shaper.arrival(peer, size, loop.time())
-            if at is not None:
-                self._later(loop, at, sock, frames, peer, msg_type, size)
-                return
-        self._transmit(sock, frames, peer, msg_type, size)
-
-    def _later(
-        self,
-        loop: asyncio.AbstractEventLoop,
-        when: float,
-        sock: zmq.asyncio.Socket,
-        frames: list[bytes],
-        peer: str,
-        msg_type: str,
-        size: int,
-    ) -> None:
-        def fire() -> None:
-            self._timers.discard(handle)
-            self._transmit(sock, frames, peer, msg_type, size)
-
-        handle = loop.call_at(when, fire)
-        self._timers.add(handle)
-
-    def _transmit(
-        self, sock: zmq.asyncio.Socket, frames: list[bytes], peer: str, msg_type: str, size: int
-    ) -> None:
-        if sock.closed:
-            return
-        # zmq.asyncio sends at once when it can and otherwise queues the send;
-        # either way the returned future is only watched for failures.
-        fut = cast("asyncio.Future[object]", sock.send_multipart(frames, copy=True))
-        if fut.done():
-            _report_send(fut)
-        else:
-            fut.add_done_callback(_report_send)
-        self.stats.record_sent(peer, msg_type, size)
-
     # -- receiving -----------------------------------------------------------
 
     def _spawn(self, coro: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]:
@@ -409,105 +355,35 @@ class ZmqTransport:
         if not task.cancelled() and task.exception() is not None:
             log.error("reader %s stopped", task.get_name(), exc_info=task.exception())
 
-    async def _read(self, sock: zmq.asyncio.Socket, handle: Callable[[list[bytes]], None]) -> None:
+    async def _read(
+        self, sock: zmq.asyncio.Socket, handle: Callable[[list[Any]], None], copy: bool = True
+    ) -> None:
         # One awaited receive (the "poll"), then non-blocking receives through a
         # plain shadow of the same socket while ZMQ_EVENTS says more is queued: a
         # batch costs no futures. The next awaited receive re-checks ZMQ_EVENTS
         # itself, so no edge of zmq's edge-triggered fd is lost.
         shadow: zmq.Socket[bytes] = zmq.Socket.shadow(sock.underlying)
         while True:
-            frames: list[bytes] = await sock.recv_multipart()
+            frames: list[Any] = await sock.recv_multipart(copy=copy)
             self._dispatch(handle, frames)
             for _ in range(_BATCH):
                 if not cast(int, shadow.getsockopt(_EVENTS)) & _POLLIN:
                     break
-                self._dispatch(handle, shadow.recv_multipart(_NOBLOCK))
+                self._dispatch(handle, shadow.recv_multipart(_NOBLOCK, copy=copy))
             else:
                 # A full batch: let other tasks run (awaiting a receive that can
                 # complete at once would not yield to them).
                 await asyncio.sleep(0)
 
-    def _dispatch(self, handle: Callable[[list[bytes]], None], frames: list[bytes]) -> None:
+    def _dispatch(self, handle: Callable[[list[Any]], None], frames: list[Any]) -> None:
         try:
             handle(frames)
         except Exception:  # a bug in one message's handling must not stop the reader
             log.exception("peer %s failed to dispatch a message", self.peer_id.short)
 
-    def _on_router_frames(self, frames: list[bytes]) -> None:
-        route = Route(frames[0], "?" + frames[0].hex())
-        data = frames[1] if len(frames) > 1 else b""
-        size = sum(len(f) for f in frames[1:])
-        if len(frames) != 2 or size > self.max_message_size:
-            reason = "oversized" if size > self.max_message_size else "malformed"
-            self._reject(route, data, reason, size, f"{reason} message ({size} bytes)")
-            return
-        try:
-            env = codec.decode(data)
-        except ProtocolError as exc:
-            self._reject(route, data, "malformed", size, str(exc))
-            return
-        peer = str(env.sender)
-        if env.kind is Kind.REPLY:
-            self.stats.record_dropped(peer, "unexpected", size)
-            return
-        try:
-            self._merge(env.lamport)
-        except ProtocolError as exc:
-            self.stats.record_dropped(peer, "malformed", size)
-            if env.kind is Kind.REQUEST:  # a notification is never answered
-                self.reply(route, env.request_id, ErrorReply(exc.code, str(exc)))
-            return
-        self.stats.record_received(peer, env.body_name, size)
-        if self._sink is not None:
-            self._sink.on_message(Inbound(env, Route(route.routing_id, peer), None, size))
-
-    def _reject(self, route: Route, data: bytes, reason: str, size: int, why: str) -> None:
-        self.stats.record_dropped(route.peer, reason, size)
-        request_id = codec.peek_request_id(data)
-        log.debug("dropped %s message from %s: %s", reason, route.peer, why)
-        if request_id is not None and not self._closed:
-            self.reply(route, request_id, ErrorReply(ProtocolError.code, why))
-
-    def _on_dealer_frames(self, address: str, frames: list[bytes]) -> None:
-        size = sum(len(f) for f in frames)
-        data = frames[0] if frames else b""
-        error: ProtocolError | None = None
-        if len(frames) != 1 or size > self.max_message_size:
-            reason = "oversized" if size > self.max_message_size else "malformed"
-            error = ProtocolError(f"{reason} reply from {address} ({size} bytes)")
-        else:
-            try:
-                env = codec.decode(data)
-                if env.kind is Kind.REPLY:
-                    self._merge(env.lamport)
-            except ProtocolError as exc:
-                reason, error = "malformed", exc
-        if error is not None:
-            self.stats.record_dropped(address, reason, size)
-            request_id = codec.peek_request_id(data)
-            if request_id is not None and self._sink is not None:
-                self._sink.on_broken_reply(address, request_id, error)
-            return
-        if env.kind is not Kind.REPLY:
-            self.stats.record_dropped(address, "unexpected", size)
-            return
-        self.stats.record_received(address, env.body_name, size)
-        if self._sink is not None:
-            self._sink.on_message(Inbound(env, None, address, size))
-
-    def _merge(self, lamport: int) -> None:
-        """Fold a received Lamport time into the clock (DESIGN §4).
-
-        Raises:
-            ProtocolError: the time is more than `limits.MAX_CLOCK_JUMP` ahead.
-        """
-        try:
-            limits.clock_jump(self.clock.now(), lamport)
-        except LimitExceeded as exc:
-            raise ProtocolError(str(exc)) from None
-        self.clock.merge(lamport)
-
-
-def _report_send(fut: asyncio.Future[object]) -> None:
-    if not fut.cancelled() and fut.exception() is not None:
-        log.warning("send failed: %s", fut.exception())
+    def _on_secure_router_frames(self, frames: list[zmq.Frame]) -> None:
+        # libzmq stamps every message with the ZAP User-Id of its connection,
+        # which `curve.ZapHandler` makes the client's public key in hex.
+        user = frames[-1].get(_USER_ID) if len(frames) > 1 else None
+        key = bytes.fromhex(str(user)) if user else None
+        self._receiver.on_router([f.bytes for f in frames], key)

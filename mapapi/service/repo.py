@@ -195,14 +195,15 @@ class Repository:
             )
         _refuse_a_kept_store(meta / STORE)
         meta.mkdir(parents=True, exist_ok=True)
+        # A secure peer's id is derived from its key (docs/design.md "Secure swarm"),
+        # so every peer can check which id a connection's key may speak as.
+        peer_id = _make_keys(meta).peer_id if secure else PeerId.new()
         config = RepoConfig(
             name=name or root.name,
-            peer_id=PeerId.new(),
+            peer_id=peer_id,
             spatial=spatial or SpatialGrid(),
             secure=secure,
         )
-        if secure:
-            _make_keys(meta)
         SqliteStore(meta / STORE, create=True).close()
         _write_config(meta, config)  # last: its presence means "initialised"
         return cls(root, config)
@@ -278,7 +279,10 @@ class Repository:
 
     def make_secure(self) -> None:
         """Make this open repository secure: a keypair and an empty trust list.
-        Its data is kept; its peer must be restarted to use them.
+        Its data and its peer id are kept (its chunks' holder sets name that id),
+        so the id is not derived from the key: other peers bind it to the key
+        (`mapctl trust add KEY --id ID`, as `mapctl key show` prints). Its peer
+        must be restarted to use them.
 
         Raises:
             UsageError: it is secure already, or its peer runs.
@@ -307,7 +311,9 @@ class Repository:
             return None
         from mapapi.net.security import Security
 
-        return Security.load(self.meta_dir)
+        # An id that is not derived from the key (a repository made secure before
+        # ids were, or by `make_secure`) stays this peer's id; the others bind it.
+        return Security.load(self.meta_dir, self.config.peer_id)
 
     def open_store(self) -> SqliteStore:
         """Open the repository's store."""
@@ -406,13 +412,13 @@ def _refuse_a_kept_store(path: Path) -> None:
         )
 
 
-def _make_keys(meta: Path) -> None:
+def _make_keys(meta: Path) -> Security:
     """The keypair and empty trust list of a new secure repository; `.mapapi/` is
     made private (0700): it holds the secret key, the store and the control socket."""
     from mapapi.net.security import Security
 
     meta.chmod(0o700)
-    Security.create(meta)
+    return Security.create(meta)
 
 
 class PeerLock:

@@ -38,15 +38,24 @@ def key() -> None:
 @json_option
 @pass_session
 def key_show(session: Session, as_json: bool) -> None:
-    """Print this peer's public key: what other peers pass to `trust add`."""
+    """Print this peer's public key: what other peers pass to `trust add`
+    (with `--id ID` too when this peer's id is not derived from its key)."""
     from mapapi import key_text
     from mapctl import render
 
-    public = key_text(_security(session).keys.public)
-    if as_json:
-        render.emit_json({"public_key": public})
-    else:
+    security = _security(session)
+    public = key_text(security.keys.public)
+    bound = security.own_id  # None: the id is derived from the key
+    if as_json:  # the peer id is derived from the key unless it is named
+        render.emit_json({"public_key": public} | ({} if bound is None else {"peer_id": bound}))
+    elif bound is None:
         render.line(public)
+    else:
+        render.line(f"{public} {bound}")
+        render.line(
+            f"this peer's id is not derived from its key: other peers trust it with "
+            f"`mapctl trust add {public} --id {bound}`"
+        )
 
 
 @click.group("trust")
@@ -56,16 +65,29 @@ def trust() -> None:
 
 @trust.command("add")
 @click.argument("keys", metavar="KEY...", nargs=-1, required=True)
+@click.option(
+    "--id",
+    "peer_id",
+    metavar="PEER_ID",
+    help="The peer id bound to KEY, for a peer whose id is not derived from its key "
+    "(as its `mapctl key show` says); it may send as no other.",
+)
 @json_option
 @pass_session
-def trust_add(session: Session, keys: tuple[str, ...], as_json: bool) -> None:
+def trust_add(session: Session, keys: tuple[str, ...], peer_id: str | None, as_json: bool) -> None:
     """Trust each KEY (64 hex digits, as `mapctl key show` prints them)."""
-    from mapapi import key_text, parse_key
+    from mapapi import PeerId, UsageError, key_text, parse_key
     from mapctl import render
 
     security = _security(session)
     parsed = [parse_key(text) for text in keys]  # all valid, or nothing is written
-    rows = [{"key": key_text(k), "added": security.trust.add(k)} for k in parsed]
+    if peer_id is not None and len(parsed) != 1:
+        raise UsageError("--id binds one key: give one KEY with it")
+    try:
+        bound = PeerId(peer_id) if peer_id is not None else None
+    except ValueError as exc:
+        raise UsageError(f"--id: {exc}") from None
+    rows = [{"key": key_text(k), "added": security.trust.add(k, bound)} for k in parsed]
     if as_json:
         render.emit_json({"keys": rows})
         return

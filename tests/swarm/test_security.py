@@ -2,13 +2,15 @@
 
 Trusted keys are admitted, untrusted ones can neither join, read nor write, a
 relay in the middle sees no plaintext, and a secure peer and an open one fail
-to connect with a message that says so instead of a timeout.
+to connect with a message that says so instead of a timeout. A trusted peer
+cannot speak as another: the key is the identity (issue 18 §2).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from pathlib import Path
 
@@ -16,11 +18,22 @@ import pytest
 
 from mapapi import Peer, PeerId
 from mapapi.core.errors import AccessRefused
-from mapapi.net.messages import ChunkList, ChunkListQuery, Hello, Member
+from mapapi.core.ids import CommitId
+from mapapi.net import codec
+from mapapi.net.codec import Envelope, ErrorReply, Kind
+from mapapi.net.messages import (
+    ChunkList,
+    ChunkListQuery,
+    CommitApply,
+    Hello,
+    LockRequest,
+    Member,
+    RaftPropose,
+)
 from mapapi.net.rpc import Rpc
-from mapapi.net.security import Security, key_text, keyed_address, split_address
+from mapapi.net.security import Security, key_text, keyed_address, peer_id_of, split_address
 from mapapi.net.transport import ZmqTransport
-from tests.swarm.conftest import TABLE, Counter, counter_chunk, net, share, value
+from tests.swarm.conftest import TABLE, Counter, counter_chunk, log_ids, net, share, value
 
 MakePeer = Callable[..., Awaitable[Peer]]
 MARKER = "plaintext-marker-7f3c"
@@ -274,3 +287,105 @@ class TestMixed:
         forged = keyed_address(split_address(a.address)[0], keys_of(c).keys.public)
         with pytest.raises(AccessRefused, match="does not hold the key"):
             await net(b).rpc.request(forged, ChunkListQuery())
+
+
+class HostileClient:
+    """A trusted-but-hostile peer's hand-made CURVE connection: it authenticates
+    with its own key and writes any `sender` it likes into the envelopes."""
+
+    def __init__(self, keys: Security, address: str) -> None:
+        import zmq
+        import zmq.asyncio
+
+        from mapapi.net import curve
+
+        endpoint, server_key = split_address(address)
+        assert server_key is not None
+        self.context = zmq.asyncio.Context()
+        self.sock = self.context.socket(zmq.DEALER)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        curve.secure_dealer(self.sock, keys, server_key)
+        self.sock.connect(endpoint)
+        self._ids = iter(range(1, 1_000_000))
+
+    async def ask(self, sender: PeerId, body: object) -> Envelope:
+        """Send a request as `sender` and return the reply (within 5 s)."""
+        request_id = next(self._ids)
+        await self.sock.send(codec.encode(Envelope(request_id, sender, 1, Kind.REQUEST, body)))
+        async with asyncio.timeout(5):
+            reply = codec.decode(await self.sock.recv())
+        assert reply.request_id == request_id
+        return reply
+
+    def close(self) -> None:
+        self.sock.close(linger=0)
+        self.context.term()
+
+
+@contextlib.asynccontextmanager
+async def hostile(keys: Security, address: str) -> AsyncIterator[HostileClient]:
+    client = HostileClient(keys, address)
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def refused(reply: Envelope) -> bool:
+    return isinstance(reply.body, ErrorReply) and reply.body.code == AccessRefused.code
+
+
+class TestIdentityIsTheKey:
+    """Issue 18 §2: a trusted peer cannot speak as another (the probe's case)."""
+
+    async def test_a_secure_repositorys_id_is_derived_from_its_key(
+        self, make_peer: MakePeer
+    ) -> None:
+        peer = await make_peer(secure=True)
+        assert peer.id == peer_id_of(keys_of(peer).keys.public)
+        assert keys_of(peer).peer_id == peer.id
+
+    async def test_a_trusted_peer_cannot_lock_or_commit_as_another(
+        self, make_peer: MakePeer, caplog: pytest.LogCaptureFixture
+    ) -> None:
+        s1, s2, rogue = await secure_swarm(make_peer, 3)
+        chunk, _ = await counter_chunk(s1, 1)
+        await share(chunk, [s2])  # s1 and s2 hold it; the rogue holds nothing
+        before = await log_ids(s1)
+        stats = net(s1).rpc.transport.stats
+        forged = [
+            LockRequest(chunk),
+            CommitApply(chunk, 1, CommitId.new()),
+            RaftPropose(chunk, b"\x00" * 16),
+        ]
+        async with hostile(keys_of(rogue), s1.address) as client:
+            for body in forged:
+                reply = await client.ask(s2.id, body)
+                assert refused(reply), f"{type(body).__name__} as s2 was {reply.body}"
+            # the same connection under its own id is served: the key is why
+            own = await client.ask(rogue.id, LockRequest(chunk))
+            assert not refused(own)
+        assert stats.dropped_count("forged") == len(forged)
+        warnings = [r.getMessage() for r in caplog.records if "claiming to be peer" in r.message]
+        assert any(str(s2.id) in w and key_text(keys_of(rogue).keys.public) in w for w in warnings)
+        assert await log_ids(s1) == before  # nothing applied
+        assert await log_ids(s2) == before
+
+    async def test_a_bound_id_is_accepted_and_only_from_its_key(
+        self,
+        make_peer: MakePeer,
+        client: Callable[[Security | None], Awaitable[Rpc]],
+        tmp_path: Path,
+    ) -> None:
+        (a,) = await secure_swarm(make_peer, 1)
+        # a repository made secure before ids were derived keeps its old id
+        made = Security.create(tmp_path / "legacy")
+        made.trust.add(keys_of(a).keys.public)
+        legacy = dataclasses.replace(made, own_id=PeerId.new())
+        keys_of(a).trust.add(legacy.keys.public)  # trusted, but its id is not bound
+        rpc = await client(legacy)
+        assert rpc.transport.peer_id == legacy.own_id  # it sends as its id
+        with pytest.raises(AccessRefused, match="is not the peer of this connection's key"):
+            await rpc.request(a.address, ChunkListQuery())
+        keys_of(a).trust.add(legacy.keys.public, legacy.own_id)  # `trust add KEY --id ID`
+        await rpc.request(a.address, ChunkListQuery(), expect=ChunkList)
