@@ -47,6 +47,11 @@ from mapbench.sim_world import (
     world,
 )
 
+SHAPES = ((5, 3), (5, 3), (3, 3), (7, 5), (4, 1), (2, 1))
+"""(nodes, founding voters) a commit-path seed draws from: the default group of three
+voters with two more holders, three alone, five, and a robot's own chunk (one voter, the
+other holders learners)."""
+
 __all__ = ["TICK", "Faults", "Sim", "SimNode", "Violation", "run_seeds"]
 
 
@@ -70,7 +75,8 @@ class Sim:
 
     Args:
         seed: everything random derives from it, so a run replays exactly.
-        nodes: how many processes; the first `voters` found the group, the rest may join.
+        nodes: how many processes; the first `voters` found the group, the rest may join
+            (None: 5 and 3 for the pure core; for the commit path, drawn from `SHAPES`).
         fault_ticks: how long faults and client load last, in ticks of each node.
         compact_after: compact a node's log once it has applied this many entries past its
             snapshot (None: drawn from the seed).
@@ -81,8 +87,8 @@ class Sim:
     def __init__(
         self,
         seed: int,
-        nodes: int = 5,
-        voters: int = 3,
+        nodes: int | None = None,
+        voters: int | None = None,
         fault_ticks: int = 200,
         compact_after: int | None = None,
         faults: Faults | None = None,
@@ -93,6 +99,10 @@ class Sim:
         self.rng = random.Random(seed)
         self.faults = replace(faults) if faults else world(self.rng)  # heal() mutates it
         self.compact_after = compact_after or self.rng.choice([4, 16, 10**9])
+        if nodes is None or voters is None:
+            drawn = self.rng.choice(SHAPES) if commits else (5, 3)
+            nodes, voters = nodes or drawn[0], voters or drawn[1]
+        self.shape = (nodes, voters)
         self.fault_end = fault_ticks * TICK
         self.now = self._seq = 0
         self._events: list[tuple[int, int, Callable[[], None]]] = []
@@ -410,7 +420,8 @@ class Sim:
         """One line: what happened in this run."""
         terms = max(self.checker.leaders, default=0)
         return (
-            f"seed {self.seed}: {len(self.checker.history)} entries, {len(self.acked)} acked, "
+            f"seed {self.seed}: {self.shape[0]} nodes, {self.shape[1]} voters, "
+            f"{len(self.checker.history)} entries, {len(self.acked)} acked, "
             f"{len(self.failed)} failed, {len(self.unknown)} unknown, {terms} terms, "
             f"{self.workload.summary()}{self.faults}"
         )

@@ -12,7 +12,7 @@ from mapapi.swarm import apply
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.raft_types import Config, Entry, EntryKind, Ready, Snapshot
 from mapbench import sim_clients, sim_store
-from mapbench.sim import Sim, Violation, run_seeds
+from mapbench.sim import SHAPES, Sim, Violation, run_seeds
 from mapbench.sim_clients import CommitWorkload
 from mapbench.sim_store import CHUNK, ChunkReplica
 from mapbench.sim_world import A0
@@ -29,7 +29,7 @@ def replica(sim: Sim, nid: int) -> ChunkReplica:
 def test_calm_world_acknowledges_or_conflicts_every_proposal() -> None:
     """Without faults every proposal commits or conflicts (and is retried); the counter is
     a0 plus the acknowledged increments exactly; every store holds the same commits."""
-    sim = run_seed(1, faults=CALM, commits=True)
+    sim = run_seed(1, faults=CALM, commits=True, nodes=5, voters=3)
     workload = sim.workload
     assert isinstance(workload, CommitWorkload)
     assert sim.acked
@@ -52,12 +52,18 @@ def test_same_seed_same_commits() -> None:
 
 def test_the_commit_seeds_exercise_conflicts_stale_reads_and_snapshots() -> None:
     """Stale begins conflict and are retried; compaction sends stores snapshots."""
-    sims = [run_seed(seed, compact_after=4, commits=True) for seed in range(8)]
+    sims = [run_seed(s, compact_after=4, commits=True, nodes=5, voters=3) for s in range(8)]
     counts = [s.counts() for s in sims]
     assert all(c["conflicts"] for c in counts)
     assert all(c["stale_reads"] for c in counts)
     assert any(s.unknown for s in sims)
     assert any(replica(s, n).installed for s in sims for n in s.nodes)
+
+
+def test_the_commit_seeds_draw_their_group_shape() -> None:
+    """Commit-path seeds run groups of three, five, three of five and one voter."""
+    shapes = {Sim(seed, commits=True).shape for seed in range(40)}
+    assert shapes == set(SHAPES)
 
 
 def test_a_lost_update_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
