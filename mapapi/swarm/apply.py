@@ -66,10 +66,12 @@ def apply_proposal(
     The chunk's clock (`Store.raft_time`) is the caller's to advance to
     `Outcome.record.time`.
     """
-    reads = read_ids(
-        store, proposal.isolation, proposal.read_set, proposal.scopes, proposal.begin_time
-    )
+    # Only this chunk's part of the reads and scans: a holder may hold other chunks
+    # too, and a decision that looked at them would differ from holder to holder.
+    scopes = {(table, chunk) for table, scope in proposal.scopes if scope in (None, chunk)}
+    reads = read_ids(store, proposal.isolation, proposal.read_set, scopes, proposal.begin_time)
     latest = store.latest([c.item_id for c in proposal.changes] + sorted(reads))
+    reads = {i for i in reads if i in latest and latest[i].chunk_id == chunk}
     accepted, conflicts = validate(
         proposal.changes,
         latest,

@@ -11,6 +11,7 @@ import pytest
 
 from mapapi.core import codec
 from mapapi.core.errors import UsageError
+from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Isolation, Op
@@ -197,3 +198,26 @@ def test_a_byte_flipped_in_the_sqlite_file_is_found(tmp_path: Path) -> None:
     again.close()
     assert len(problems) == 1
     assert "no longer matches" in problems[0]
+
+
+def test_holders_decide_alike_whatever_other_chunks_they_hold(store: MemoryStore) -> None:
+    """A serializable proposal that read an item of another chunk and scanned a whole table
+    was decided against whatever else each holder held: where the other chunk's item had
+    changed since the begin time, a conflict; on a holder without that chunk, a commit. Two
+    histories of one chunk. Each group now decides only its chunk's part."""
+    other_chunk, elsewhere = ChunkId.new(), ItemId.new()
+    both = MemoryStore()
+    both.add_table("t", "google.protobuf.Struct")
+    for chunk in (CHUNK, other_chunk):
+        both.add_chunk(chunk, "t")
+    both.raft_save(CHUNK, hard=(1, 0, 1))
+    record = CommitRecord(CommitId.new(), 5, AUTHOR, "m", (other_chunk,))
+    written = Revision(elsewhere, "t", other_chunk, b"1", 5, 5, False, AUTHOR, record.id)
+    both.apply_commit(record, [written])
+    change = Change(Op.INSERT, "t", ITEM, CHUNK, b"0")
+    scan = Proposal(
+        CommitId.new(), 4, AUTHOR, "robot", "", "m", 3, "serializable", (change,),
+        read_set=frozenset({elsewhere}), scopes=frozenset({("t", None)}),
+    )  # fmt: skip
+    outcomes = [decide(s, scan) for s in (store, both)]
+    assert [o.committed for o in outcomes] == [True, True]
