@@ -561,6 +561,31 @@ def bench_fuzz(messages_n: int, seed: int, directory: str | None, as_json: bool)
     check_fuzz(report)
 
 
+@bench.command("flood")
+@click.option(
+    "--senders", "-n", default=20, show_default=True, type=click.IntRange(1, 200),
+    help="Sender processes.",
+)  # fmt: skip
+@click.option(
+    "--megabytes", "-m", default=120, show_default=True, type=click.IntRange(1, 4096),
+    help="MB each sender sends.",
+)  # fmt: skip
+@click.option(
+    "--mode", type=click.Choice(["frame", "parts", "both"]), default="both", show_default=True,
+    help="One frame per sender (the probe), or parts as a mapapi peer sends a large message.",
+)  # fmt: skip
+@json_option
+def bench_flood(senders: int, megabytes: int, mode: str, as_json: bool) -> None:
+    """Flood a real peer process with large messages from N sender processes and
+    report the peak of its resident memory and its ping latency (issue 18 §5)."""
+    from mapbench.flood import MODES, asdict, run_flood
+
+    modes = MODES if mode == "both" else (mode,)
+    for each in modes:
+        report = asdict(run_flood(senders, megabytes, each))
+        _render(f"bench flood: {senders} x {megabytes} MB, {each}", report, as_json)
+
+
 @bench.command("soak")
 @click.option(
     "--minutes",
