@@ -21,6 +21,7 @@ from mapapi.core.ids import CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Op
 from mapapi.swarm.apply import Outcome
+from mapapi.swarm.chain_check import check_chain
 from mapapi.swarm.raft_types import Config, Entry, EntryKind, Message, PersistentState
 from mapbench.sim_store import (
     ACCOUNT_IDS,
@@ -307,12 +308,16 @@ class CommitWorkload:
                 )
 
     def _check_replica(self, nid: int, replica: ChunkReplica) -> None:
-        """The store holds what the replica applied, in log order, and every acknowledged
-        commit up to its applied index."""
+        """The store holds what the replica applied, in log order, with a sound hash chain,
+        and every acknowledged commit up to its applied index."""
         stored = replica._stored_commits()
         if stored != replica.commits:
             raise Violation(f"node {nid}: the store's commits differ from those it applied")
         self.history.check(nid, stored)
+        if replica.store.chain_length(CHUNK) != len(stored):
+            raise Violation(f"node {nid}: its hash chain does not link every commit")
+        if problems := check_chain(replica.store, CHUNK):
+            raise Violation(f"node {nid}: {problems[0]}")
         kept = replica.store.raft_load(CHUNK)
         if kept is None or (kept.applied, kept.time) != (replica.applied, replica.time):
             raise Violation(f"node {nid}: the store's applied index or clock is not the replica's")

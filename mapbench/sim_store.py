@@ -10,7 +10,8 @@ transaction per Ready with `raft_applied(index, time)`, as `RaftGroups._apply_co
 store's applied index, and applying anything twice is a `Violation`.
 
 A snapshot (log compaction, catch-up) carries the chunk's revisions and commit records in the
-storage codec, installed with `install_chunk` like a chunk transfer.
+storage codec, installed with `install_chunk` like a chunk transfer, and its hash chain (the
+receiver's must be a prefix of it).
 """
 
 from __future__ import annotations
@@ -216,9 +217,14 @@ class ChunkReplica:
 
     def install(self, snap: Snapshot) -> None:
         """Take a leader's snapshot: the chunk's state at `snap.index`, as a chunk transfer."""
-        time, revisions, records = decode_snapshot(snap.data)
+        time, revisions, records, links = decode_snapshot(snap.data)
         with self.store.exclusive():
             self.store.install_chunk(CHUNK, TABLE, TYPE_NAME, revisions, records, [])
+            own = self.store.chain_links(CHUNK)
+            if own != links[: len(own)]:
+                raise Violation(f"node {self.nid}: its hash chain is not the snapshot's")
+            for commit, link in links[len(own) :]:
+                self.store.chain_link(CHUNK, commit, link)
             self.store.raft_applied(CHUNK, snap.index, time)
         self.applied, self.time = snap.index, time
         self.installed += 1
@@ -228,7 +234,10 @@ class ChunkReplica:
     def snapshot_data(self) -> bytes:
         """The chunk's state at `applied` (the store holds exactly that)."""
         return encode_snapshot(
-            self.time, self.store.chunk_revisions(CHUNK), self.store.chunk_commits(CHUNK)
+            self.time,
+            self.store.chunk_revisions(CHUNK),
+            self.store.chunk_commits(CHUNK),
+            self.store.chain_links(CHUNK),
         )
 
     def values(self) -> tuple[int, list[int]]:
@@ -237,10 +246,10 @@ class ChunkReplica:
         return value(latest.get(COUNTER)), [value(latest.get(i)) for i in ACCOUNT_IDS]
 
     def digest(self) -> Hashable:
-        """Every item's latest value and time, and the chunk's clock."""
+        """Every item's latest value and time, the chunk's clock and its chain's head."""
         latest = self.store.latest(ITEMS)
         items = tuple((r.data, r.update_time, r.commit_id) for r in latest.values())
-        return self.time, len(self.commits), items
+        return self.time, len(self.commits), items, self.store.chain_head(CHUNK)
 
     def check(self) -> None:
         """The bank total is conserved and no account is overdrawn."""
@@ -249,18 +258,25 @@ class ChunkReplica:
             raise Violation(f"bank accounts {accounts} at {self.applied}")
 
 
-def encode_snapshot(time: int, revisions: list[Revision], records: list[CommitRecord]) -> bytes:
-    """A snapshot payload: the chunk's clock, revisions and commit records (storage codec)."""
+Links = list[tuple[CommitId, bytes]]
+
+
+def encode_snapshot(
+    time: int, revisions: list[Revision], records: list[CommitRecord], links: Links
+) -> bytes:
+    """A snapshot payload: the chunk's clock, revisions and commit records (storage codec),
+    and its hash chain."""
     return json.dumps(
         {
             "time": time,
             "revisions": [codec.revision_to_pb(r).SerializeToString().hex() for r in revisions],
             "commits": [codec.commit_record_to_pb(c).SerializeToString().hex() for c in records],
+            "chain": [[c, link.hex()] for c, link in links],
         }
     ).encode()
 
 
-def decode_snapshot(data: bytes) -> tuple[int, list[Revision], list[CommitRecord]]:
+def decode_snapshot(data: bytes) -> tuple[int, list[Revision], list[CommitRecord], Links]:
     """The inverse of `encode_snapshot`."""
     raw = json.loads(data)
     revisions = [
@@ -271,4 +287,5 @@ def decode_snapshot(data: bytes) -> tuple[int, list[Revision], list[CommitRecord
         codec.commit_record_from_pb(core_pb2.CommitRecord.FromString(bytes.fromhex(h)))
         for h in raw["commits"]
     ]
-    return raw["time"], revisions, records
+    links = [(CommitId(c), bytes.fromhex(h)) for c, h in raw["chain"]]
+    return raw["time"], revisions, records, links
