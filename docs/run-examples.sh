@@ -29,7 +29,7 @@ stop_peers() {
             mapctl -C "$repo" peer stop > /dev/null || true
             left=1
         fi
-    done < <(find "$1" -path '*/.mapapi/service/peer.pid' 2> /dev/null)
+    done < <(find "$1" -path '*/.mapapi/peer.pid' 2> /dev/null)
     return $left
 }
 

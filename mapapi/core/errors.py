@@ -97,7 +97,7 @@ class CorruptRepoError(RepoError):
 
 class NotOwner(RepoError):
     """A call reached a peer daemon's control endpoint without the owner's token
-    (`.mapapi/service/control.token`, readable only by the user who runs the daemon)."""
+    (`.mapapi/control.token`, readable only by the user who runs the daemon)."""
 
     code = 14
 

@@ -2,12 +2,12 @@
 
 The daemon serves `ControlCall{op, args_json, token}` on an `Rpc` of its own,
 bound to an ipc socket that only its owner can reach (mode 0600):
-`.mapapi/service/control.sock` inside the repository, or, when that path
+`.mapapi/control.sock` inside the repository, or, when that path
 is too long for an ipc endpoint, a socket named after the repository in a
 private runtime folder (`$XDG_RUNTIME_DIR/mapapi`, else `/tmp/mapapi-<uid>`,
 mode 0700, refused if anyone else owns it). There is no tcp fallback: a tcp
 port on 127.0.0.1 is open to every local user. As a second wall, every call
-carries the owner's token from `.mapapi/service/control.token` (mode 0600, new at each
+carries the owner's token from `.mapapi/control.token` (mode 0600, new at each
 start); a call without it is refused and logged before anything runs, so the
 daemon never reads or writes a path sent by a caller it has not authenticated.
 It runs `Operations.call(op, args)` on its peer and answers `ControlResult{json}`.
@@ -128,7 +128,7 @@ def private_runtime_dir() -> Path:
 
 
 def issue_token(repo: Repository) -> str:
-    """Write a fresh owner's token to `.mapapi/service/control.token` (mode 0600); returns it."""
+    """Write a fresh owner's token to `.mapapi/control.token` (mode 0600); returns it."""
     token = secrets.token_hex(32)
     path = repo.meta_dir / TOKEN_FILE
     tmp = path.with_name(f"{TOKEN_FILE}.{os.getpid()}.tmp")
@@ -185,7 +185,7 @@ class ControlServer:
 
     @property
     def address(self) -> str:
-        """The bound endpoint, e.g. ipc:///home/robot/map/.mapapi/service/control.sock."""
+        """The bound endpoint, e.g. ipc:///home/robot/map/.mapapi/control.sock."""
         return self.rpc.address
 
     async def start(self, repo: Repository) -> str:
@@ -296,7 +296,7 @@ class RemoteOperations:
             await rpc.request(self.endpoint, Ping(), timeout=timeout, expect=Pong)
         except NetworkError as exc:
             raise PeerUnavailable(
-                f"{self.who} does not answer on {self.endpoint}; look at .mapapi/service/peer.log, "
+                f"{self.who} does not answer on {self.endpoint}; look at .mapapi/peer.log, "
                 "or restart it with `mapctl peer stop` and `mapctl peer start`"
             ) from exc
 

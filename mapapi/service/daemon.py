@@ -2,7 +2,7 @@
 
 `serve()` opens the repository, puts its peer on the network, joins the
 given members, serves the local control endpoint (`mapapi.service.control`) and
-writes `.mapapi/service/peer.pid` (atomically, once everything serves), then runs
+writes `.mapapi/peer.pid` (atomically, once everything serves), then runs
 until it is told to stop: SIGTERM, SIGINT or SIGHUP (with `run()`), or the
 `shutdown` operation that `mapctl peer stop` sends. Stopping is graceful: no
 new control calls, Bye to every member, sockets closed, pid file removed.

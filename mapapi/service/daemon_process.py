@@ -87,7 +87,7 @@ def spawn_detached(
     timeout: float = START_TIMEOUT,
 ) -> PeerRecord:
     """Start `argv` (a command that serves `repo` in the foreground) as a daemon in
-    a new session, its output appended to `.mapapi/service/peer.log`; return its record
+    a new session, its output appended to `.mapapi/peer.log`; return its record
     once it serves and answers on its control endpoint.
 
     Raises:

@@ -103,7 +103,7 @@ class RepoConfig:
 
 @dataclass(frozen=True)
 class PeerRecord:
-    """What `.mapapi/service/peer.pid` says about the running peer daemon (`mapapi.service.daemon`).
+    """What `.mapapi/peer.pid` says about the running peer daemon (`mapapi.service.daemon`).
 
     Attributes:
         pid: the daemon's process id.
@@ -132,7 +132,7 @@ class Repository:
     """A map repository folder.
 
     The peer daemon of a repository holds an exclusive `flock` on
-    `.mapapi/service/peer.lock` while it runs. That lock, not the pid, tells a live
+    `.mapapi/peer.lock` while it runs. That lock, not the pid, tells a live
     daemon from a stale pid file: the kernel drops it when the process ends,
     however it ends (SIGKILL, a crash), and a recycled pid cannot fake it.
     """

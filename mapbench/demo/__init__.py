@@ -73,7 +73,7 @@ def run_demo(
         stopped = swarm.stop() if swarm is not None else []
         tell("info", f"stopped {len(stopped)} peer processes")
         if keep:
-            tell("info", f"kept {root} for the peers' logs (.mapapi/service/peer.log)")
+            tell("info", f"kept {root} for the peers' logs (.mapapi/peer.log)")
         else:
             shutil.rmtree(root, ignore_errors=True)
     summary["timings"]["stop"] = round(time.perf_counter() - stopping, 3)

@@ -68,7 +68,7 @@ class LocalSwarm:
         once the ring holds the previous ones); `started` hears of each.
 
         Raises:
-            MapError: a daemon did not serve (see its `.mapapi/service/peer.log`).
+            MapError: a daemon did not serve (see its `.mapapi/peer.log`).
         """
         for repo in self.repos:
             joins = (self.peers[0].record.join,) if self.peers else ()

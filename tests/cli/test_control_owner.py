@@ -26,7 +26,7 @@ from mapapi.core.errors import NotOwner, RepoError
 from mapapi.service.control import TOKEN_FILE, RemoteOperations, endpoint, private_runtime_dir
 from tests.cli.conftest import InProcessDaemon
 
-DEEP = "d" * 120  # a folder name that makes `.mapapi/service/control.sock` too long for ipc
+DEEP = "d" * 120  # a folder name that makes `.mapapi/control.sock` too long for ipc
 
 
 @pytest.fixture
