@@ -20,14 +20,18 @@ from mapapi.core import codec
 from mapapi.core.ids import CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Op
+from mapapi.core.view import Scope
+from mapapi.store.base import ReplicaStore
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_check import check_chain
 from mapapi.swarm.raft_types import Config, Entry, EntryKind, Message, PersistentState
 from mapbench.sim_store import (
     ACCOUNT_IDS,
+    AUDIT,
     CHUNK,
     COUNTER,
     TABLE,
+    TOTAL,
     ChunkReplica,
     CommitHistory,
     StoreDisk,
@@ -157,9 +161,14 @@ class CounterWorkload:
         return {}
 
 
+Plan = tuple[tuple[Change, ...], frozenset[ItemId], frozenset[Scope]]
+"""A client transaction's writes, read set and scanned scopes."""
+
+
 @dataclass(frozen=True)
 class ClientOp:
-    """One client operation: an increment by `by`, or a transfer `src` -> `dst`."""
+    """One client operation: an increment by `by`, a transfer `src` -> `dst`, or an audit
+    (a serializable scan of the chunk that writes the bank total it read)."""
 
     id: int
     kind: str
@@ -196,17 +205,20 @@ class CommitWorkload:
         return wire(m, envelope=m.snapshot is not None or self.sent % ENVELOPE_EVERY == 0)
 
     def client(self, node: SimNode) -> None:
-        """Begin a new increment or transfer at `node`, unless `IN_FLIGHT` are waiting."""
+        """Begin a new increment, transfer or audit at `node`, unless `IN_FLIGHT` wait."""
         if sum(map(len, self.sim.pending.values())) >= IN_FLIGHT:
             self.busy += 1
             return
         rng = self.sim.rng
         n = len(self.ops) + 1
-        if rng.random() < 0.5:
+        draw = rng.random()
+        if draw < 0.45:
             op = ClientOp(n, "inc", by=rng.randint(1, 5))
-        else:
+        elif draw < 0.85:
             src, dst = rng.sample(range(ACCOUNTS), 2)
             op = ClientOp(n, "xfer", src=src, dst=dst)
+        else:
+            op = ClientOp(n, "audit")
         self.ops[n] = op
         self.attempt(node, op, 1)
 
@@ -225,20 +237,12 @@ class CommitWorkload:
             self.stale += reader is not node
         if not isinstance(replica := reader.replica, ChunkReplica):
             raise TypeError(f"node {reader.id} holds a {type(replica).__name__}")
-        store = replica.store
-        begin = store.raft_time(CHUNK)
-        if op.kind == "inc":
-            now = value(store.read(COUNTER, begin))
-            changes: tuple[Change, ...] = (_update(COUNTER, now + op.by),)
-            reads: frozenset[ItemId] = frozenset()
-        else:
-            src, dst = ACCOUNT_IDS[op.src], ACCOUNT_IDS[op.dst]
-            have, got = value(store.read(src, begin)), value(store.read(dst, begin))
-            if have < AMOUNT:
-                self.declined += 1
-                return None
-            changes = (_update(src, have - AMOUNT), _update(dst, got + AMOUNT))
-            reads = frozenset({src, dst})
+        begin = replica.store.raft_time(CHUNK)
+        planned = self._plan(op, replica.store, begin)
+        if planned is None:
+            self.declined += 1
+            return None
+        changes, reads, scopes = planned
         cid = commit_id(len(self.attempts) + 1)
         proposal = Proposal(
             cid,
@@ -251,11 +255,32 @@ class CommitWorkload:
             "snapshot" if op.kind == "inc" else "serializable",
             changes,
             read_set=reads,
+            scopes=scopes,
         )
         self.attempts[cid] = (op, attempt)
         if op.kind == "inc":
             self.history.increments[cid] = op.by
         return sim.propose(node, cid, codec.encode_proposal(proposal))
+
+    @staticmethod
+    def _plan(op: ClientOp, store: ReplicaStore, begin: int) -> Plan | None:
+        """What `op` writes, reads and scans, read at `begin` (None: a transfer the source
+        cannot pay). Every read at a begin time sees a whole prefix of the log: the bank
+        total holds there."""
+        if op.kind == "inc":
+            now = value(store.read(COUNTER, begin))
+            return (_update(COUNTER, now + op.by),), frozenset(), frozenset()
+        if op.kind == "audit":
+            total = sum(value(store.read(i, begin)) for i in ACCOUNT_IDS)
+            if total != TOTAL:
+                raise Violation(f"a read at time {begin} saw a bank total of {total}")
+            return (_update(AUDIT, total),), frozenset(), frozenset({(TABLE, CHUNK)})
+        src, dst = ACCOUNT_IDS[op.src], ACCOUNT_IDS[op.dst]
+        have, got = value(store.read(src, begin)), value(store.read(dst, begin))
+        if have < AMOUNT:
+            return None
+        changes = (_update(src, have - AMOUNT), _update(dst, got + AMOUNT))
+        return changes, frozenset({src, dst}), frozenset()
 
     def outcome(self, key: Any, entry: Entry, result: object) -> None:
         """Committed: acknowledged. Conflicting: begin again (up to `MAX_ATTEMPTS`)."""
@@ -314,6 +339,10 @@ class CommitWorkload:
         if stored != replica.commits:
             raise Violation(f"node {nid}: the store's commits differ from those it applied")
         self.history.check(nid, stored)
+        for record in replica.store.chunk_commits(CHUNK):  # every past time reads a prefix
+            total = sum(value(replica.store.read(i, record.time)) for i in ACCOUNT_IDS)
+            if total != TOTAL:
+                raise Violation(f"node {nid}: a read at {record.time} sees a total of {total}")
         if replica.store.chain_length(CHUNK) != len(stored):
             raise Violation(f"node {nid}: its hash chain does not link every commit")
         if problems := check_chain(replica.store, CHUNK):

@@ -37,7 +37,10 @@ TABLE, TYPE_NAME = "bank", "google.protobuf.Struct"
 CHUNK = ChunkId(f"{0xC << 124 | 1:032x}")
 COUNTER = ItemId(f"{0xA << 124:032x}")
 ACCOUNT_IDS = tuple(ItemId(f"{0xA << 124 | i + 1:032x}") for i in range(ACCOUNTS))
-ITEMS = (COUNTER, *ACCOUNT_IDS)
+AUDIT = ItemId(f"{0xB << 124:032x}")
+"""Where audits write the bank total they read (a serializable scan of the chunk)."""
+ITEMS = (COUNTER, AUDIT, *ACCOUNT_IDS)
+TOTAL = ACCOUNTS * BALANCE
 GENESIS = CommitId(f"{0xE << 124:032x}")
 GENESIS_TIME = 1
 
@@ -66,7 +69,7 @@ def new_store(config: Config | None) -> MemoryStore:
     store.add_table(TABLE, TYPE_NAME)
     store.add_chunk(CHUNK, TABLE)
     record = CommitRecord(GENESIS, GENESIS_TIME, peer(0), "genesis", (CHUNK,))
-    data = [str(A0).encode()] + [str(BALANCE).encode()] * ACCOUNTS
+    data = [str(A0).encode(), str(TOTAL).encode()] + [str(BALANCE).encode()] * ACCOUNTS
     revisions = [
         Revision(i, TABLE, CHUNK, d, GENESIS_TIME, GENESIS_TIME, False, peer(0), GENESIS)
         for i, d in zip(ITEMS, data, strict=True)
@@ -252,10 +255,13 @@ class ChunkReplica:
         return self.time, len(self.commits), items, self.store.chain_head(CHUNK)
 
     def check(self) -> None:
-        """The bank total is conserved and no account is overdrawn."""
+        """The bank total is conserved, no account is overdrawn, audits saw the total."""
         _, accounts = self.values()
-        if sum(accounts) != ACCOUNTS * BALANCE or min(accounts) < 0:
+        if sum(accounts) != TOTAL or min(accounts) < 0:
             raise Violation(f"bank accounts {accounts} at {self.applied}")
+        audit = value(self.store.latest([AUDIT]).get(AUDIT))
+        if audit != TOTAL:
+            raise Violation(f"an audit committed a bank total of {audit}")
 
 
 Links = list[tuple[CommitId, bytes]]

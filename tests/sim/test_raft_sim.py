@@ -14,7 +14,7 @@ import pytest
 from mapbench.sim import TICK, Faults, Sim, Violation, replay_command
 
 SEEDS = 300  # the pure core: about 7 s on one core; `SIM_SEEDS=5000 pytest tests/sim -k seed`
-COMMIT_SEEDS = 250  # the commit path (about 0.06 s a seed): about 15 s on one core
+COMMIT_SEEDS = 200  # the commit path (about 0.07 s a seed): about 15 s on one core
 CALM = Faults(drop=0.0, duplicate=0.0, max_delay=5, defer_ready=0.0, fault_every=10**9)
 
 
