@@ -40,7 +40,7 @@ test: $(TEST_STAMP)
 	$(PY) -m pytest --durations=10
 
 check: $(TEST_STAMP)
-	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow; 100 simulator seeds of make test's 600): about a minute on 2 cores; make test runs them all"
+	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow; 100 simulator seeds per mode, of make test's 300 + 200): about a minute on 2 cores; make test runs them all"
 	SIM_SEEDS=100 $(PY) -m pytest $(CHECK_TESTS) -m "not slow" --durations=5
 
 demo: $(DEMO_STAMP)
