@@ -26,7 +26,7 @@ from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, applier
-from mapapi.swarm.chain_check import ChainWatch
+from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.groups import Applied, NotChunkLeader, RaftGroups
 from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
