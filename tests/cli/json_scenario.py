@@ -188,6 +188,8 @@ BENCHMARKS: dict[Command, tuple[str, ...]] = {
     ),
     ("bench", "fuzz"): ("--messages", "50"),
     ("bench", "soak"): ("--minutes", "0.1", "--peers", "3"),
+    ("bench", "flood"): ("--senders", "2", "--megabytes", "3", "--mode", "frame"),
+    ("bench", "sim"): ("--seeds", "2"),
     ("demo",): ("--peers", "3"),
 }
 """The smallest run of each benchmark (and the demo), with its arguments."""
