@@ -29,7 +29,8 @@ from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Conflict, build_revisions, validate
+from mapapi.core.transaction import Conflict
+from mapapi.core.validate import build_revisions, validate
 from mapapi.core.view import Scope
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.swarm.commit_check import CommitRule

@@ -24,14 +24,8 @@ from mapapi.core.errors import (
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.transaction import (
-    Change,
-    Conflict,
-    MergeFn,
-    Transaction,
-    build_revisions,
-    validate,
-)
+from mapapi.core.transaction import Change, Conflict, MergeFn, Transaction
+from mapapi.core.validate import build_revisions, validate
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.swarm import apply
 from mapapi.swarm.quorum import is_quorum

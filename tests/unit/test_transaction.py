@@ -23,14 +23,8 @@ from mapapi import (
 )
 from mapapi.core.history import Revision
 from mapapi.core.ids import CommitId, PeerId
-from mapapi.core.transaction import (
-    Change,
-    Op,
-    Transaction,
-    TxState,
-    build_revisions,
-    validate,
-)
+from mapapi.core.transaction import Change, Op, Transaction, TxState
+from mapapi.core.validate import build_revisions, validate
 
 # -- pure validation ----------------------------------------------------------
 
