@@ -14,7 +14,7 @@ from mapapi.core.errors import MapError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.raft import RaftNode
-from mapapi.swarm.raft_types import NONE, Entry, Ready, Role
+from mapapi.swarm.raft_types import NONE, Entry, EntryKind, Ready, Role
 from mapapi.swarm.raft_wire import rows
 
 
@@ -106,3 +106,22 @@ def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:
         entries=rows(rd.entries),
         snapshot=None if snap is None else (snap.index, snap.term, snap.config.encode(), snap.data),
     )
+
+
+def apply_committed(
+    store: ReplicaStore, group: GroupState, entries: tuple[Entry, ...], apply: ApplyFn
+) -> None:
+    """Apply committed entries in one store transaction, each NORMAL one with its
+    applied index and the chunk's clock after it (so the next proposal of the
+    same batch is stamped past it), then answer their proposers."""
+    if not entries:
+        return
+    group.progress.set()
+    results: dict[int, Applied] = {}
+    with store.exclusive():
+        for entry in entries:
+            if entry.kind is EntryKind.NORMAL:
+                results[entry.index] = applied = apply(group.chunk, entry)
+                store.raft_applied(group.chunk, entry.index, applied.time)
+        store.raft_applied(group.chunk, entries[-1].index)
+    group.settle(entries, results)

@@ -35,14 +35,13 @@ from mapapi.swarm.group_state import (
     ApplyFn,
     GroupState,
     NotChunkLeader,
+    apply_committed,
     persist,
 )
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_types import (
     NONE,
     Config,
-    Entry,
-    EntryKind,
     NotLeader,
     PersistentState,
     ProposalRefused,
@@ -353,7 +352,7 @@ class RaftGroups:
             persist(self.store, group.chunk, rd)
             for message in rd.messages:
                 self._outbox.setdefault(message.to, []).append(to_wire(group.chunk, message))
-            self._apply_committed(group, rd.committed_entries)
+            apply_committed(self.store, group, rd.committed_entries, self._apply)
             for read in rd.read_states:
                 waiting = group.reads.get(read.context)
                 if waiting is not None and not waiting.done():
@@ -363,19 +362,6 @@ class RaftGroups:
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
                 self._on_change()
             group.node.advance(rd)
-
-    def _apply_committed(self, group: GroupState, entries: tuple[Entry, ...]) -> None:
-        if not entries:
-            return
-        group.progress.set()
-        results: dict[int, Applied] = {}
-        with self.store.exclusive():
-            for entry in entries:
-                if entry.kind is EntryKind.NORMAL:
-                    results[entry.index] = self._apply(group.chunk, entry)
-            time = max((r.time for r in results.values()), default=0)
-            self.store.raft_applied(group.chunk, entries[-1].index, time)
-        group.settle(entries, results)
 
     def _flush(self) -> None:
         """Send each peer its messages of every group, as one notification."""
