@@ -28,7 +28,8 @@ from mapapi.core import faults
 from mapapi.core.errors import MapError
 from mapapi.service import known_peers
 from mapapi.service.daemon_process import LOG_ENV, refuse_if_running
-from mapapi.service.repo import PeerLock, PeerRecord
+from mapapi.service.peer_lock import PeerLock
+from mapapi.service.repo import PeerRecord
 
 if TYPE_CHECKING:
     from mapapi.service.control import ControlServer

@@ -1,21 +1,21 @@
-"""The repository on disk: `<repo>/.mapapi/` with config, identity and store (DESIGN §9)."""
+"""The repository on disk: `<repo>/.mapapi/` with config, identity and store (DESIGN §9).
+
+Its config is `repo_config.py`; the lock a running daemon holds on it is `peer_lock.py`.
+"""
 
 from __future__ import annotations
 
 import json
 import logging
 import os
-import time
-import tomllib
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from mapapi.core.errors import (
     AlreadyInitialisedError,
     ConfigLost,
     CorruptRepoError,
-    MapError,
     NotARepoError,
     RepoError,
     UsageError,
@@ -23,6 +23,7 @@ from mapapi.core.errors import (
 from mapapi.core.ids import PeerId
 from mapapi.lookup.spatial import SpatialGrid
 from mapapi.service.recover import RecoveredIdentity, recover_identity
+from mapapi.service.repo_config import FIX_CONFIG, RepoConfig
 from mapapi.store.sqlite import SqliteStore
 
 if TYPE_CHECKING:
@@ -37,69 +38,6 @@ PEER_LOG = "peer.log"  # a detached daemon's stdout and stderr
 CONTROL_SOCKET = "control.sock"  # the daemon's local control endpoint (ipc)
 
 log = logging.getLogger(__name__)
-
-_SECURE_TOML = (
-    "\n# A secure peer (CurveZMQ): its keypair and trust list are in .mapapi/curve/.\n"
-    "[security]\nsecure = true\n"
-)
-_FIX_CONFIG = (
-    "fix it in an editor (`mapctl init` in an empty folder writes a valid one to compare) "
-    "or restore it from a backup"
-)
-
-
-def _toml_str(text: str) -> str:
-    """`text` as a TOML basic string: JSON quoting without the surrogate-pair
-    escapes TOML refuses (non-ASCII stays UTF-8), and DEL escaped (JSON leaves it raw)."""
-    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
-
-
-@dataclass(frozen=True)
-class RepoConfig:
-    """What `config.toml` holds: the peer's name and id, the geometry of the
-    spatial index (which every peer of a swarm must share, DESIGN §7), and
-    whether the peer is secure (DESIGN §10; its keys are in `.mapapi/curve/`)."""
-
-    name: str
-    peer_id: PeerId
-    spatial: SpatialGrid = field(default_factory=SpatialGrid)
-    secure: bool = False
-
-    def to_toml(self) -> str:
-        """The config as TOML text (strings quoted as JSON, valid TOML; floats
-        written with repr, which round-trips exactly)."""
-        grid = self.spatial.to_config()
-        bounds = ", ".join(repr(float(v)) for v in grid["bounds"])
-        cells = ", ".join(str(int(n)) for n in grid["cells"])
-        return (
-            f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n\n"
-            f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
-            f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
-            f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
-        ) + (_SECURE_TOML if self.secure else "")
-
-    @classmethod
-    def from_toml(cls, text: str, source: Path) -> RepoConfig:
-        """Parse config text; raises CorruptRepoError naming `source` (a config
-        without a ``[spatial]`` table gets the default index geometry)."""
-        try:
-            data: dict[str, Any] = tomllib.loads(text)
-            spatial = data.get("spatial", {})
-            security = data.get("security", {})
-            if not isinstance(spatial, dict) or not isinstance(security, dict):
-                raise ValueError("[spatial] and [security] must be tables")
-            secure = security.get("secure", False)
-            if not isinstance(secure, bool):
-                raise ValueError("[security] secure must be true or false")
-            return cls(
-                name=str(data["name"]),
-                peer_id=PeerId(data["peer_id"]),
-                spatial=SpatialGrid.from_config(spatial),
-                secure=secure,
-            )
-        except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
-            raise CorruptRepoError(f"{source} is damaged: {exc}; {_FIX_CONFIG}") from exc
-
 
 @dataclass(frozen=True)
 class PeerRecord:
@@ -266,7 +204,7 @@ class Repository:
                 try:
                     text = config.read_text(encoding="utf-8")
                 except UnicodeDecodeError as exc:
-                    raise CorruptRepoError(f"{config} is damaged: {exc}; {_FIX_CONFIG}") from exc
+                    raise CorruptRepoError(f"{config} is damaged: {exc}; {FIX_CONFIG}") from exc
                 except OSError as exc:
                     raise RepoError(
                         f"cannot read {config}: {exc.strerror or exc}; check its owner and "
@@ -419,44 +357,3 @@ def _make_keys(meta: Path) -> Security:
 
     meta.chmod(0o700)
     return Security.create(meta)
-
-
-class PeerLock:
-    """The exclusive lock a peer daemon holds on its repository for its lifetime."""
-
-    def __init__(self, fd: int) -> None:
-        self._fd: int | None = fd
-
-    @classmethod
-    def acquire(cls, repo: Repository, timeout: float = 2.0) -> PeerLock:
-        """Lock `repo` for this process.
-
-        Raises:
-            UsageError: another daemon runs on the repository.
-        """
-        import fcntl
-
-        fd = os.open(repo.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                return cls(fd)
-            except BlockingIOError:
-                # A `peer_locked()` probe holds a shared lock for microseconds; a
-                # daemon holds it for good.
-                if time.monotonic() > deadline:
-                    os.close(fd)
-                    record = repo.read_peer_record()
-                    who = f" (pid {record.pid}, {record.address})" if record else ""
-                    raise UsageError(
-                        f"a peer already runs on {repo.root}{who}; "
-                        "stop it with `mapctl peer stop` first"
-                    ) from None
-                time.sleep(0.01)  # sync-ok: waiting out another process's probe
-
-    def release(self) -> None:
-        """Unlock (idempotent)."""
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
