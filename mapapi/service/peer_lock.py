@@ -23,10 +23,10 @@ class PeerLock:
     @classmethod
     def acquire(cls, repo: Repository, timeout: float = 2.0) -> PeerLock:
         """Lock `repo` for this process.
+
         Raises:
             UsageError: another daemon runs on the repository.
         """
-
         fd = os.open(repo.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
         deadline = time.monotonic() + timeout
         while True:

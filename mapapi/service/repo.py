@@ -39,6 +39,7 @@ CONTROL_SOCKET = "control.sock"  # the daemon's local control endpoint (ipc)
 
 log = logging.getLogger(__name__)
 
+
 @dataclass(frozen=True)
 class PeerRecord:
     """What `.mapapi/peer.pid` says about the running peer daemon (`mapapi.service.daemon`).
