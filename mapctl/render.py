@@ -273,3 +273,12 @@ def fsck_report(report: dict[str, Any]) -> None:
     for problem in [*report["integrity"], *payloads["bad"], *chains["problems"]]:
         line(f"  {problem}", "red")
     line("no problem found" if report["ok"] else "problems found: see above", "bold")
+
+
+def measures(title: str, result: dict[str, Any], as_json: bool) -> None:
+    """A benchmark's figures: JSON for scripts, else a table of its flat measures."""
+    if as_json:
+        emit_json(result)
+        return
+    rows = [(k, v) for k, v in result.items() if not isinstance(v, dict | list)]
+    table(title, ["measure", "value"], rows)
