@@ -329,7 +329,7 @@ def bench_triggers(
         measures(title, row, as_json)
     triggers.check_triggers(rows)
     if plot:
-        from mapbench.plot import plot_triggers
+        from mapbench.plot_triggers import plot_triggers
 
         plot_triggers(rows, plot, machine)
 
