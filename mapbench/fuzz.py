@@ -41,7 +41,7 @@ from mapapi.net import messages
 from mapbench import store_check
 from mapbench.fuzz_client import Fuzzer
 from mapbench.hostile import Fix, Generator, Pools
-from mapbench.swarm import WorkerProcess, spawn_workers
+from mapbench.workers import WorkerProcess, spawn_workers
 
 FLOW_EVERY = 20
 """One message in this many starts a step-by-step commit (`commit_flow`)."""

@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from mapapi.testing import wait_until
-from mapbench.swarm import WorkerProcess, counter_swarm, run_increments, spawn_workers
+from mapbench.swarm import counter_swarm, run_increments
+from mapbench.workers import WorkerProcess, spawn_workers
 
 pytestmark = pytest.mark.slow
 
