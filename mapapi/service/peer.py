@@ -165,9 +165,9 @@ class Peer:
             grid=self.grid,
             liveness=liveness,
             security=self.security,
+            on_applied=self.triggers.applied,
         )
         address = await swarm.start(listen)
-        swarm.replicator.applied_hooks.append(self.triggers.applied)
         self.swarm = swarm
         return address
 

@@ -37,7 +37,7 @@ from mapapi.swarm.lock import Grant
 from mapapi.swarm.lock_client import LockService
 from mapapi.swarm.membership import Members
 from mapapi.swarm.recovery import Recovery
-from mapapi.swarm.replication import HOLDER_TTL, Replicator
+from mapapi.swarm.replication import HOLDER_TTL, AppliedHook, Replicator
 from mapapi.swarm.subscriptions import Subscriptions
 
 log = logging.getLogger(__name__)
@@ -83,6 +83,7 @@ class Swarm:
         grid: SpatialGrid | None = None,
         liveness: LivenessOptions | None = None,
         security: Security | None = None,
+        on_applied: AppliedHook | None = None,
     ) -> None:
         self.security = security
         transport = ZmqTransport(peer_id, clock, shaper=shaper, security=security)
@@ -114,6 +115,7 @@ class Swarm:
             store,
             holder_ttl=self.chord_options.holder_ttl,
             places=self.places,
+            on_applied=on_applied,
         )
         self._chord: ChordNode | None = None  # made by `start()`: it needs the address
         self.subscriptions = Subscriptions(

@@ -57,6 +57,9 @@ if TYPE_CHECKING:
     from mapapi.lookup.chunk_places import ChunkPlaces
     from mapapi.lookup.dht.chord import ChordNode
 
+AppliedHook = Callable[[CommitRecord, Sequence[Revision]], None]
+"""Called with each commit another peer applies here, in apply order (triggers)."""
+
 log = logging.getLogger(__name__)
 
 PART_REVISIONS = 5_000  # revisions per ChunkPart message
@@ -104,6 +107,7 @@ class Replicator:
         *,
         holder_ttl: float = HOLDER_TTL,
         places: ChunkPlaces | None = None,
+        on_applied: AppliedHook | None = None,
     ) -> None:
         self.rpc = rpc
         self.members = members
@@ -119,7 +123,7 @@ class Replicator:
         self.announced = Announcements(self._holder_entries, holder_ttl, "holder")
         self.places = places  # the chunks' boxes, kept current if given
         # called with each commit another peer applies here, in apply order
-        self.applied_hooks: list[Callable[[CommitRecord, Sequence[Revision]], None]] = []
+        self._on_applied = on_applied
         for body, handler in (
             (CommitBatch, self.rpc_commit_batch),
             (CommitApply, self.rpc_commit_apply),
@@ -201,8 +205,8 @@ class Replicator:
         self.store.apply_commit(record, revisions)
         if self.places is not None:
             self.places.applied(revisions)
-        for hook in self.applied_hooks:
-            hook(record, revisions)
+        if self._on_applied is not None:
+            self._on_applied(record, revisions)
 
     def staged(self, chunk: ChunkId) -> list[Staged]:
         """The batches staged here for `chunk` and not yet applied or dropped."""
