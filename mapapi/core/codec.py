@@ -10,6 +10,9 @@ protobuf: the Chord index's values are `lookup.proto` messages that
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
+from typing import Any
+
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
@@ -17,8 +20,8 @@ from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Conflict, Op
-from mapapi.core.view import View
+from mapapi.core.transaction import Change, Conflict, Isolation, Op
+from mapapi.core.view import Scope, View
 
 _GENERATED = (core_pb2, maps_pb2, types_pb2)  # registers every mapapi.v1 type
 
@@ -137,9 +140,7 @@ def encode_view(view: View) -> bytes:
     state = core_pb2.ViewState(name=view.name, begin_time=view.begin_time, isolation=view.isolation)
     state.changes.extend(change_to_pb(c) for c in view.changes)
     state.conflicts.extend(conflict_to_pb(c) for c in view.conflicts)
-    state.read_set.extend(i.to_bytes() for i in sorted(view.read_set))
-    for table, chunk in sorted(view.scopes, key=lambda s: (s[0], s[1] or "")):
-        state.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
+    _put_reads(state, view.read_set, view.scopes)
     return bytes(state.SerializeToString())
 
 
@@ -156,11 +157,11 @@ def decode_view(blob: bytes) -> View:
         return View(
             state.name,
             state.begin_time,
-            "serializable" if state.isolation == "serializable" else "snapshot",
+            _isolation(state.isolation),
             [change_from_pb(c) for c in state.changes],
             conflicts,
-            {ItemId.from_bytes(i) for i in state.read_set},
-            {(s.table, ChunkId.from_bytes(s.chunk) if s.chunk else None) for s in state.scopes},
+            set(_read_set(state)),
+            set(_scopes(state)),
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc
@@ -181,9 +182,7 @@ def encode_proposal(p: Proposal) -> bytes:
     m.changes.extend(change_to_pb(c) for c in p.changes)
     for item_id, time in sorted(p.since.items()):
         m.since.add(item_id=item_id.to_bytes(), time=time)
-    m.read_set.extend(i.to_bytes() for i in sorted(p.read_set))
-    for table, chunk in sorted(p.scopes, key=lambda s: (s[0], s[1] or "")):
-        m.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
+    _put_reads(m, p.read_set, p.scopes)
     return bytes(m.SerializeToString())
 
 
@@ -204,13 +203,30 @@ def decode_proposal(data: bytes) -> Proposal:
             m.view,
             m.message,
             m.begin_time,
-            "serializable" if m.isolation == "serializable" else "snapshot",
+            _isolation(m.isolation),
             tuple(change_from_pb(c) for c in m.changes),
             {ItemId.from_bytes(s.item_id): s.time for s in m.since},
-            frozenset(ItemId.from_bytes(i) for i in m.read_set),
-            frozenset(
-                (s.table, ChunkId.from_bytes(s.chunk) if s.chunk else None) for s in m.scopes
-            ),
+            frozenset(_read_set(m)),
+            frozenset(_scopes(m)),
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a commit proposal in a chunk's log does not parse: {exc}") from exc
+
+
+# The read set and scanned scopes, stored alike in a view and in a proposal.
+def _put_reads(m: Any, read_set: Iterable[ItemId], scopes: Iterable[Scope]) -> None:
+    m.read_set.extend(i.to_bytes() for i in sorted(read_set))
+    for table, chunk in sorted(scopes, key=lambda s: (s[0], s[1] or "")):
+        m.scopes.add(table=table, chunk=chunk.to_bytes() if chunk else b"")
+
+
+def _read_set(m: Any) -> Iterator[ItemId]:
+    return (ItemId.from_bytes(i) for i in m.read_set)
+
+
+def _scopes(m: Any) -> Iterator[Scope]:
+    return ((s.table, ChunkId.from_bytes(s.chunk) if s.chunk else None) for s in m.scopes)
+
+
+def _isolation(text: str) -> Isolation:
+    return "serializable" if text == "serializable" else "snapshot"

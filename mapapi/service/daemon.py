@@ -24,12 +24,12 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
-from mapapi.core import faults
 from mapapi.core.errors import MapError
 from mapapi.service import known_peers
 from mapapi.service.daemon_process import LOG_ENV, refuse_if_running
 from mapapi.service.peer_lock import PeerLock
 from mapapi.service.repo import PeerRecord
+from mapapi.swarm import faults
 
 if TYPE_CHECKING:
     from mapapi.service.control import ControlServer
@@ -157,7 +157,7 @@ async def serve(
     """
     from mapapi.service.control import ControlServer
 
-    faults.arm_from_env(os.environ)  # failure tests: see mapapi.core.faults
+    faults.arm_from_env(os.environ)  # failure tests: see mapapi.swarm.faults
     stop = stop or asyncio.Event()
     lock = PeerLock.acquire(repo)
     try:

@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from mapapi.core import faults, limits
+from mapapi.core import limits
 from mapapi.core.errors import (
     ChunkNotFound,
     LockNotHeld,
@@ -49,6 +49,7 @@ from mapapi.net.messages import (
 )
 from mapapi.net.rpc import Request, Rpc, ask_all, first_answer
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm import faults
 from mapapi.swarm.commit_check import check_batch
 from mapapi.swarm.lock_client import Held, LockService
 from mapapi.swarm.membership import Members

@@ -2,7 +2,7 @@
 at every holder (issue 7 §1-3).
 
 Three daemons hold one counter. The writer's daemon runs with a fault point
-armed (`MAPAPI_FAULTS`, see `mapapi.core.faults`), so its commit stops at an exact
+armed (`MAPAPI_FAULTS`, see `mapapi.swarm.faults`), so its commit stops at an exact
 moment: every batch staged and nothing applied (`commit.staged`), or applied at
 the writer alone (`commit.applied`). The test kills it there with SIGKILL and
 checks that

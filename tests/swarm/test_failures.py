@@ -15,7 +15,6 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import pytest
 
-from mapapi.core import faults
 from mapapi.core.errors import CommitUncertain, MapError, PeerUnavailable, RequestTimeout
 from mapapi.core.history import CommitRecord
 from mapapi.core.ids import ChunkId, ItemId
@@ -24,6 +23,7 @@ from mapapi.net.messages import CommitApply
 from mapapi.net.rpc import Request
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
+from mapapi.swarm import faults
 from mapapi.swarm.liveness import LivenessOptions
 from mapapi.swarm.replication import encode_holder
 from mapapi.testing import until

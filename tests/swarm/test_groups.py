@@ -216,6 +216,16 @@ class Ledger(Node):
         return applied
 
 
+async def counter_group(world: World, kind: type[Node]) -> list[Node]:
+    """Three peers of `kind` founding the group of a counters chunk."""
+    nodes = [await world.add(kind=kind) for _ in range(3)]
+    for node in nodes:
+        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_chunk(CHUNK, "counters")
+        node.groups.found(CHUNK, [n.id for n in nodes])
+    return nodes
+
+
 async def increment(leader: Node, clock: LamportClock) -> int:
     """One optimistic increment, retried on conflict; returns how many attempts it took."""
     for attempt in range(1, 100):
@@ -234,11 +244,7 @@ async def increment(leader: Node, clock: LamportClock) -> int:
 
 
 async def test_algorithm_1_through_the_log_ends_at_a0_plus_p_times_n(world: World) -> None:
-    nodes = [await world.add(kind=Ledger) for _ in range(3)]
-    for node in nodes:
-        node.store.add_table("counters", "google.protobuf.Struct")
-        node.store.add_chunk(CHUNK, "counters")
-        node.groups.found(CHUNK, [n.id for n in nodes])
+    nodes = await counter_group(world, Ledger)
     leader = await leader_of(nodes, CHUNK)
     clock = LamportClock()
     first = Change(Op.INSERT, "counters", COUNTER, CHUNK, str(A0).encode())
@@ -325,11 +331,7 @@ class Writer(Ledger):
 
 
 async def writers(world: World) -> tuple[list[Writer], Writer]:
-    nodes = [await world.add(kind=Writer) for _ in range(3)]
-    for node in nodes:
-        node.store.add_table("counters", "google.protobuf.Struct")
-        node.store.add_chunk(CHUNK, "counters")
-        node.groups.found(CHUNK, [n.id for n in nodes])
+    nodes = await counter_group(world, Writer)
     leader = await leader_of(nodes, CHUNK)
     for node in nodes:
         await node.wait(lambda node=node: node.groups.leader(CHUNK) == leader.id)
@@ -379,11 +381,7 @@ async def test_a_follower_catches_up_before_a_fresh_read(world: World) -> None:
 
 # -- holders compare their histories ----------------------------------------------------
 async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
-    nodes = [await world.add(kind=Ledger) for _ in range(3)]
-    for node in nodes:
-        node.store.add_table("counters", "google.protobuf.Struct")
-        node.store.add_chunk(CHUNK, "counters")
-        node.groups.found(CHUNK, [n.id for n in nodes])
+    nodes = await counter_group(world, Ledger)
     leader = await leader_of(nodes, CHUNK)
     clock = LamportClock()
     first = Change(Op.INSERT, "counters", COUNTER, CHUNK, b"1")

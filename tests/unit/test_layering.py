@@ -130,3 +130,18 @@ def test_the_checker_sees_an_upward_import() -> None:
     # A check that finds nothing proves nothing: the maps layer sits above core.
     assert layer("mapapi.maps.graph") > layer("mapapi.core.ids")  # type: ignore[operator]
     assert "mapapi.core.errors" in imports_of("mapapi.maps.plot")
+
+
+def test_the_core_is_pure() -> None:
+    """No core module drives I/O: asyncio and zmq stay out (DESIGN §3)."""
+    impure = {}
+    for module, path in MODULES.items():
+        if not module.startswith("mapapi.core."):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        found = {n for n in names if n.split(".")[0] in ("asyncio", "zmq")}
+        if found:
+            impure[module] = sorted(found)
+    assert impure == {}
