@@ -260,7 +260,7 @@ class CommitWorkload:
         self.attempts[cid] = (op, attempt)
         if op.kind == "inc":
             self.history.increments[cid] = op.by
-        return sim.propose(node, cid, codec.encode_proposal(proposal))
+        return sim.propose(node, cid, codec.encode_entry(proposal))
 
     @staticmethod
     def _plan(op: ClientOp, store: ReplicaStore, begin: int) -> Plan | None:

@@ -24,6 +24,7 @@ from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core import codec
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal
 from mapapi.net import codec as net_codec
 from mapapi.net.codec import Kind
 from mapapi.net.messages import RaftBatch
@@ -205,7 +206,9 @@ class ChunkReplica:
         """Decide the entry's proposal on this store; the `Outcome` (None for other kinds)."""
         if not step(self, entry):
             return None
-        proposal = codec.decode_proposal(entry.data)
+        proposal = codec.decode_entry(entry.data)
+        if not isinstance(proposal, Proposal):
+            raise Violation(f"entry {entry.index} carries {proposal!r}, not a proposal")
         if self.store.commit_record(proposal.commit_id) is not None:
             raise Violation(f"{proposal.commit_id.short} applied twice (index {entry.index})")
         outcome: Outcome = apply_proposal(self.store, CHUNK, proposal)

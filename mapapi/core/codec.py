@@ -19,7 +19,7 @@ from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.proposal import Proposal
+from mapapi.core.proposal import LogEntry, Proposal, TxDecision
 from mapapi.core.transaction import Change, Conflict, Isolation, Op
 from mapapi.core.view import Scope, View
 
@@ -167,34 +167,47 @@ def decode_view(blob: bytes) -> View:
         raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc
 
 
-def encode_proposal(p: Proposal) -> bytes:
-    """Serialize a transaction proposed to a chunk's Raft group (a log entry's data)."""
+def encode_entry(entry: LogEntry) -> bytes:
+    """Serialize what a chunk's Raft log entry carries: a proposal (a prepare when
+    it names participants) or a transaction's decision."""
+    if isinstance(entry, TxDecision):
+        decision = core_pb2.TxDecision(
+            commit_id=entry.commit_id.to_bytes(), commit=entry.commit, time=entry.time
+        )
+        return bytes(core_pb2.ChunkLogEntry(decision=decision).SerializeToString())
     m = core_pb2.CommitProposal(
-        commit_id=p.commit_id.to_bytes(),
-        time=p.time,
-        author=p.author.to_bytes(),
-        author_name=p.author_name,
-        view=p.view,
-        message=p.message,
-        begin_time=p.begin_time,
-        isolation=p.isolation,
+        commit_id=entry.commit_id.to_bytes(),
+        time=entry.time,
+        author=entry.author.to_bytes(),
+        author_name=entry.author_name,
+        view=entry.view,
+        message=entry.message,
+        begin_time=entry.begin_time,
+        isolation=entry.isolation,
     )
-    m.changes.extend(change_to_pb(c) for c in p.changes)
-    for item_id, time in sorted(p.since.items()):
+    m.changes.extend(change_to_pb(c) for c in entry.changes)
+    for item_id, time in sorted(entry.since.items()):
         m.since.add(item_id=item_id.to_bytes(), time=time)
-    _put_reads(m, p.read_set, p.scopes)
-    return bytes(m.SerializeToString())
+    _put_reads(m, entry.read_set, entry.scopes)
+    m.participants.extend(c.to_bytes() for c in entry.participants)
+    return bytes(core_pb2.ChunkLogEntry(proposal=m).SerializeToString())
 
 
-def decode_proposal(data: bytes) -> Proposal:
-    """A proposal from a log entry's data.
+def decode_entry(data: bytes) -> LogEntry:
+    """What a chunk's log entry carries (`encode_entry`).
 
     Raises:
         CorruptRepoError: the entry does not parse (a damaged log).
     """
-    m = core_pb2.CommitProposal()
+    entry = core_pb2.ChunkLogEntry()
     try:
-        m.ParseFromString(data)
+        entry.ParseFromString(data)
+        if entry.WhichOneof("body") == "decision":
+            d = entry.decision
+            return TxDecision(CommitId.from_bytes(d.commit_id), d.commit, d.time)
+        if entry.WhichOneof("body") != "proposal":
+            raise ValueError("the entry carries neither a proposal nor a decision")
+        m = entry.proposal
         return Proposal(
             CommitId.from_bytes(m.commit_id),
             m.time,
@@ -208,9 +221,10 @@ def decode_proposal(data: bytes) -> Proposal:
             {ItemId.from_bytes(s.item_id): s.time for s in m.since},
             frozenset(_read_set(m)),
             frozenset(_scopes(m)),
+            tuple(ChunkId.from_bytes(c) for c in m.participants),
         )
     except (DecodeError, ValueError) as exc:
-        raise CorruptRepoError(f"a commit proposal in a chunk's log does not parse: {exc}") from exc
+        raise CorruptRepoError(f"an entry in a chunk's log does not parse: {exc}") from exc
 
 
 # The read set and scanned scopes, stored alike in a view and in a proposal.

@@ -6,6 +6,10 @@ transaction committed before, the time after which a foreign write conflicts),
 the read set and scanned scopes under serializable isolation, and the commit's
 metadata. The proposer's Lamport time is a floor: holders stamp the commit at
 the chunk's next time if that is later (`swarm/apply.py`).
+
+A transaction over several chunks is proposed to each chunk as a prepare (a
+proposal naming its `participants`) and then ended by a `TxDecision` in each
+chunk's log (two-phase commit, `swarm/two_phase.py`).
 """
 
 from __future__ import annotations
@@ -34,18 +38,35 @@ class Proposal:
     since: Mapping[ItemId, int] = field(default_factory=dict)
     read_set: frozenset[ItemId] = frozenset()
     scopes: frozenset[Scope] = frozenset()
+    participants: tuple[ChunkId, ...] = ()
+    """Every chunk a multi-chunk transaction writes, in id order (empty: one chunk)."""
+
+    @property
+    def is_prepare(self) -> bool:
+        """Whether this is one chunk's prepare of a transaction over several."""
+        return bool(self.participants)
 
     def since_of(self, item_id: ItemId) -> int:
         """The time after which a foreign write to `item_id` conflicts."""
         return self.since.get(item_id, self.begin_time)
 
     @classmethod
-    def of(cls, tx: Transaction, chunk: ChunkId, message: str, time: int) -> Proposal:
-        """The part of `tx` that writes to `chunk`, proposed at Lamport `time`."""
+    def of(
+        cls,
+        tx: Transaction,
+        chunk: ChunkId,
+        message: str,
+        time: int,
+        participants: tuple[ChunkId, ...] = (),
+        commit_id: CommitId | None = None,
+    ) -> Proposal:
+        """The part of `tx` that writes to `chunk`, proposed at Lamport `time` (a
+        prepare if `participants` names the transaction's chunks; they share
+        `commit_id`)."""
         changes = tuple(c for c in tx.changes if c.chunk_id == chunk)
         since = {c.item_id: tx.since(c.item_id) for c in changes}
         return cls(
-            CommitId.new(),
+            commit_id or CommitId.new(),
             time,
             tx.author,
             tx.author_name,
@@ -57,4 +78,20 @@ class Proposal:
             {i: t for i, t in since.items() if t != tx.begin_time},
             frozenset(tx.read_set) if tx.isolation == "serializable" else frozenset(),
             frozenset(tx.scopes) if tx.isolation == "serializable" else frozenset(),
+            participants,
         )
+
+
+@dataclass(frozen=True, slots=True)
+class TxDecision:
+    """How a transaction over several chunks ended: committed at `time` on every
+    chunk it writes, or aborted (`time` 0). A chunk's log keeps the first decision
+    it applies for a transaction; later ones change nothing."""
+
+    commit_id: CommitId
+    commit: bool
+    time: int = 0
+
+
+LogEntry = Proposal | TxDecision
+"""What a chunk's log entry carries."""

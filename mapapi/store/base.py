@@ -33,6 +33,17 @@ class LogRow:
 
 
 @dataclass(frozen=True, slots=True)
+class TxRow:
+    """What a chunk's log recorded of a transaction over several chunks: `state`
+    is "prepared" (its writes wait, encoded in `data`, reserving `time`),
+    "committed" (at `time`) or "aborted"."""
+
+    state: str
+    time: int
+    data: bytes = b""
+
+
+@dataclass(frozen=True, slots=True)
 class RaftRecord:
     """What a chunk's Raft group persisted here: hard state, applied index, the
     last snapshot (index, term, config, data), the log after it, and the newest
@@ -213,6 +224,16 @@ class ReplicaStore(Store, Protocol):
 
     def chain_length(self, chunk_id: ChunkId) -> int:
         """How many commits the chunk's chain links."""
+
+    def raft_tx(self, chunk_id: ChunkId, commit_id: CommitId) -> TxRow | None:
+        """What the chunk's log recorded of a multi-chunk transaction, or None."""
+
+    def raft_tx_put(self, chunk_id: ChunkId, commit_id: CommitId, row: TxRow) -> None:
+        """Record what the chunk's log did with a transaction (inside `exclusive()`,
+        with the entry's applied index)."""
+
+    def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """The transactions prepared on the chunk and not decided there yet."""
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -10,7 +10,7 @@ from dataclasses import replace
 from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, newest_first
+from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, TxRow, newest_first
 
 
 class MemoryStore:
@@ -26,6 +26,7 @@ class MemoryStore:
         self._views: dict[str, bytes] = {}
         self._holders: dict[ChunkId, set[PeerId]] = {}
         self._raft: dict[ChunkId, RaftRecord] = {}
+        self._tx: dict[tuple[ChunkId, CommitId], TxRow] = {}
         self._chains: dict[ChunkId, list[tuple[CommitId, bytes]]] = {}
 
     def close(self) -> None:
@@ -340,8 +341,28 @@ class MemoryStore:
             kept = self._raft.get(chunk_id)
             return 0 if kept is None else kept.time
 
+    def raft_tx(self, chunk_id: ChunkId, commit_id: CommitId) -> TxRow | None:
+        """What the chunk's log recorded of a multi-chunk transaction, or None."""
+        with self._lock:
+            return self._tx.get((chunk_id, commit_id))
+
+    def raft_tx_put(self, chunk_id: ChunkId, commit_id: CommitId, row: TxRow) -> None:
+        """Record what the chunk's log did with a transaction."""
+        with self._lock:
+            self._tx[(chunk_id, commit_id)] = row
+
+    def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """The transactions prepared on the chunk and not decided there yet."""
+        with self._lock:
+            return sorted(
+                (c, row)
+                for (chunk, c), row in self._tx.items()
+                if chunk == chunk_id and row.state == "prepared"
+            )
+
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""
         with self._lock:
             self._raft.pop(chunk_id, None)
+            self._tx = {k: v for k, v in self._tx.items() if k[0] != chunk_id}
             self._chains.pop(chunk_id, None)

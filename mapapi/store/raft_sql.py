@@ -3,7 +3,8 @@
 Per chunk: the hard state (term, vote, commit index), the index applied to the
 store's revisions and the newest commit time they brought (the chunk's clock,
 which every holder derives from the same log), the last snapshot's metadata,
-the log after it, and the hash chain of the commits the log applied
+the log after it, the multi-chunk transactions the log prepared or decided
+(two-phase commit), and the hash chain of the commits the log applied
 (`core/chain.py`: one link per commit, the last one the chunk's head). Kept in
 the same file as the revisions so that an entry's effect and the applied index
 move in one SQL transaction (`SqliteStore.exclusive`): after a crash nothing is
@@ -18,7 +19,7 @@ from __future__ import annotations
 import sqlite3
 from collections.abc import Sequence
 
-from mapapi.store.base import LogRow, RaftRecord
+from mapapi.store.base import LogRow, RaftRecord, TxRow
 
 RAFT_SCHEMA = """
 CREATE TABLE IF NOT EXISTS raft_state (
@@ -30,6 +31,10 @@ CREATE TABLE IF NOT EXISTS raft_state (
 CREATE TABLE IF NOT EXISTS raft_chain (
     chunk_id TEXT NOT NULL, seq INTEGER NOT NULL, commit_id TEXT NOT NULL, link BLOB NOT NULL,
     PRIMARY KEY (chunk_id, seq)) WITHOUT ROWID;
+CREATE TABLE IF NOT EXISTS raft_tx (
+    chunk_id TEXT NOT NULL, commit_id TEXT NOT NULL, state TEXT NOT NULL,
+    time INTEGER NOT NULL, data BLOB NOT NULL,
+    PRIMARY KEY (chunk_id, commit_id)) WITHOUT ROWID;
 CREATE TABLE IF NOT EXISTS raft_log (
     chunk_id TEXT NOT NULL, idx INTEGER NOT NULL, term INTEGER NOT NULL,
     kind INTEGER NOT NULL, data BLOB NOT NULL,
@@ -137,11 +142,42 @@ def drop(con: sqlite3.Connection, chunk: str) -> None:
     """Forget `chunk`'s group (this peer no longer holds the chunk)."""
     con.execute("DELETE FROM raft_log WHERE chunk_id = ?", (chunk,))
     con.execute("DELETE FROM raft_chain WHERE chunk_id = ?", (chunk,))
+    con.execute("DELETE FROM raft_tx WHERE chunk_id = ?", (chunk,))
     con.execute("DELETE FROM raft_state WHERE chunk_id = ?", (chunk,))
 
 
-RAFT_TABLES = ("raft_state", "raft_log", "raft_chain")
+RAFT_TABLES = ("raft_state", "raft_log", "raft_chain", "raft_tx")
 """The tables above; an older store gains the ones it lacks."""
+
+
+def tx_get(con: sqlite3.Connection, chunk: str, commit_id: str) -> TxRow | None:
+    """What `chunk`'s log recorded of a multi-chunk transaction, or None."""
+    row = con.execute(
+        "SELECT state, time, data FROM raft_tx WHERE chunk_id = ? AND commit_id = ?",
+        (chunk, commit_id),
+    ).fetchone()
+    return None if row is None else TxRow(row[0], int(row[1]), bytes(row[2]))
+
+
+def tx_put(con: sqlite3.Connection, chunk: str, commit_id: str, row: TxRow) -> None:
+    """Record (or replace) what `chunk`'s log decided of a transaction."""
+    con.execute(
+        "INSERT OR REPLACE INTO raft_tx (chunk_id, commit_id, state, time, data) "
+        "VALUES (?, ?, ?, ?, ?)",
+        (chunk, commit_id, row.state, row.time, row.data),
+    )
+
+
+def tx_prepared(con: sqlite3.Connection, chunk: str) -> list[tuple[str, TxRow]]:
+    """The transactions prepared on `chunk` and not yet decided there."""
+    return [
+        (commit_id, TxRow(state, int(time), bytes(data)))
+        for commit_id, state, time, data in con.execute(
+            "SELECT commit_id, state, time, data FROM raft_tx "
+            "WHERE chunk_id = ? AND state = 'prepared' ORDER BY commit_id",
+            (chunk,),
+        )
+    ]
 
 
 def add_link(con: sqlite3.Connection, chunk: str, commit_id: str, link: bytes) -> None:

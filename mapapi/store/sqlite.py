@@ -18,23 +18,11 @@ from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import raft_sql, sqlite_replica, sqlite_rows, sqlite_schema
-from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord
+from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, TxRow
 from mapapi.store.file_check import check_file, storage_error
 from mapapi.store.sqlite_connection import Connections
 from mapapi.store.sqlite_rows import COMMIT_COLUMNS as _COMMIT_COLUMNS
 from mapapi.store.sqlite_rows import REV_COLUMNS as _REV_COLUMNS
-
-
-def _scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
-    clauses: list[str] = []
-    args: list[object] = []
-    if table is not None:
-        clauses.append("table_name = ?")
-        args.append(table)
-    if chunk is not None:
-        clauses.append("chunk_id = ?")
-        args.append(chunk)
-    return "".join(f" AND r.{c}" for c in clauses), args
 
 
 class SqliteStore:
@@ -158,7 +146,7 @@ class SqliteStore:
         self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
     ) -> list[Revision]:
         """Items visible at `time`."""
-        where, args = _scope(table, chunk)
+        where, args = sqlite_rows.scope(table, chunk)
         sql = (
             f"SELECT {_REV_COLUMNS.replace('item_id', 'r.item_id', 1)} FROM revisions r "
             "WHERE r.update_time = (SELECT MAX(update_time) FROM revisions "
@@ -188,7 +176,7 @@ class SqliteStore:
         self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
     ) -> list[Revision]:
         """Revisions written after `time`."""
-        where, args = _scope(table, chunk)
+        where, args = sqlite_rows.scope(table, chunk)
         sql = (
             f"SELECT {_REV_COLUMNS} FROM revisions r WHERE r.update_time > ?{where} "
             "ORDER BY r.update_time, r.item_id"
@@ -376,6 +364,20 @@ class SqliteStore:
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
         return raft_sql.chunk_time(self._con(), chunk_id)
+
+    def raft_tx(self, chunk_id: ChunkId, commit_id: CommitId) -> TxRow | None:
+        """What the chunk's log recorded of a multi-chunk transaction, or None."""
+        return raft_sql.tx_get(self._con(), chunk_id, commit_id)
+
+    def raft_tx_put(self, chunk_id: ChunkId, commit_id: CommitId, row: TxRow) -> None:
+        """Record what the chunk's log did with a transaction (joins `exclusive()`)."""
+        con = self._con()
+        with self._write(con):
+            raft_sql.tx_put(con, chunk_id, commit_id, row)
+
+    def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """The transactions prepared on the chunk and not decided there yet."""
+        return [(CommitId(c), row) for c, row in raft_sql.tx_prepared(self._con(), chunk_id)]
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -104,3 +104,17 @@ def write_commit(
         "UPDATE meta SET value = MAX(CAST(value AS INTEGER), ?) WHERE key = 'clock'",
         (record.time,),
     )
+
+
+def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
+    """The SQL condition (to append after a WHERE) and its arguments that keep the
+    revisions `r` of a table and a chunk (either may be None: any)."""
+    clauses: list[str] = []
+    args: list[object] = []
+    if table is not None:
+        clauses.append("table_name = ?")
+        args.append(table)
+    if chunk is not None:
+        clauses.append("chunk_id = ?")
+        args.append(chunk)
+    return "".join(f" AND r.{c}" for c in clauses), args

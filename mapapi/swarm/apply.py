@@ -24,29 +24,33 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from mapapi.core import chain, codec
+from mapapi.core import chain
 from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
-from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Conflict
+from mapapi.core.proposal import Proposal, TxDecision
+from mapapi.core.transaction import Change, Conflict
 from mapapi.core.validate import build_revisions, validate
 from mapapi.core.view import Scope
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.swarm.commit_check import CommitRule
-from mapapi.swarm.groups import Applied, ApplyFn
-from mapapi.swarm.raft_types import Entry
 
 
 @dataclass(frozen=True, slots=True)
 class Outcome:
-    """How a holder decided a proposal: committed (`record`), conflicting
-    (`conflicts`) or refused by a rule (`refusal`); the same on every holder."""
+    """How a holder decided a log entry, the same on every holder: committed
+    (`record`), conflicting (`conflicts`), refused by a rule (`refusal`), held
+    back because another transaction is prepared on the chunk (`busy`), a
+    prepare that holds (`prepared`: the time it reserved), or the decision the
+    chunk keeps for a multi-chunk transaction (`decision`, `swarm/apply_tx.py`)."""
 
     record: CommitRecord | None = None
     revisions: tuple[Revision, ...] = ()
     conflicts: tuple[Conflict, ...] = ()
     refusal: str = ""
+    busy: bool = False
+    prepared: int = 0
+    decision: TxDecision | None = None
 
     @property
     def committed(self) -> bool:
@@ -67,6 +71,46 @@ def apply_proposal(
     The chunk's clock (`Store.raft_time`) is the caller's to advance to
     `Outcome.record.time`.
     """
+    held = decide(store, chunk, proposal, rules)
+    if isinstance(held, Outcome):
+        return held
+    record = CommitRecord(
+        proposal.commit_id,
+        held.time,
+        proposal.author,
+        proposal.message,
+        (chunk,),
+        proposal.author_name,
+        proposal.view,
+    )
+    revisions = build_revisions(held.changes, held.latest, held.time, proposal.author, record.id)
+    write_commit(store, chunk, record, revisions)
+    return Outcome(record, tuple(revisions))
+
+
+@dataclass(frozen=True, slots=True)
+class Held:
+    """A proposal that holds on a replica: the changes to write, the newest
+    revisions of their items, and the time the commit gets (one past the chunk's
+    clock, or the proposer's time if later)."""
+
+    changes: list[Change]
+    latest: dict[ItemId, Revision]
+    time: int
+
+
+def decide(
+    store: ReplicaStore,
+    chunk: ChunkId,
+    proposal: Proposal,
+    rules: Sequence[CommitRule] = (),
+) -> Outcome | Held:
+    """Validate `proposal` on this replica of `chunk`: `Held` if it holds and
+    writes something, else the `Outcome` to answer (busy: another transaction is
+    prepared on the chunk, `swarm/apply_tx.py`; conflicts; a rule's refusal;
+    nothing to write)."""
+    if any(cid != proposal.commit_id for cid, _ in store.raft_tx_prepared(chunk)):
+        return Outcome(busy=True)
     # Only this chunk's part of the reads and scans: a holder may hold other chunks
     # too, and a decision that looked at them would differ from holder to holder.
     scopes = {(table, chunk) for table, scope in proposal.scopes if scope in (None, chunk)}
@@ -89,21 +133,16 @@ def apply_proposal(
         return Outcome(refusal=str(exc))
     if not accepted:
         return Outcome()
-    time = max(proposal.time, chunk_clock(store, chunk) + 1)
-    record = CommitRecord(
-        proposal.commit_id,
-        time,
-        proposal.author,
-        proposal.message,
-        (chunk,),
-        proposal.author_name,
-        proposal.view,
-    )
-    revisions = build_revisions(accepted, latest, time, proposal.author, record.id)
+    return Held(accepted, latest, max(proposal.time, chunk_clock(store, chunk) + 1))
+
+
+def write_commit(
+    store: ReplicaStore, chunk: ChunkId, record: CommitRecord, revisions: Sequence[Revision]
+) -> None:
+    """Write a commit's revisions of `chunk` and extend the chunk's hash chain."""
     store.apply_commit(record, revisions)
     previous = store.chain_head(chunk) or chain.GENESIS
     store.chain_link(chunk, record.id, chain.link(previous, chunk, record, revisions))
-    return Outcome(record, tuple(revisions))
 
 
 def chunk_clock(store: ReplicaStore, chunk: ChunkId) -> int:
@@ -113,17 +152,6 @@ def chunk_clock(store: ReplicaStore, chunk: ChunkId) -> int:
     clock = store.raft_time(chunk)
     written = store.changed_since(clock, chunk=chunk)
     return max((r.update_time for r in written), default=clock)
-
-
-def applier(store: ReplicaStore, rules: Sequence[CommitRule] = ()) -> ApplyFn:
-    """The `RaftGroups` apply hook of a peer: each committed entry is a proposal,
-    decided and written by `apply_proposal`; its outcome goes to the proposer."""
-
-    def apply_entry(chunk: ChunkId, entry: Entry) -> Applied:
-        outcome = apply_proposal(store, chunk, codec.decode_proposal(entry.data), rules)
-        return Applied(outcome, outcome.record.time if outcome.record else 0)
-
-    return apply_entry
 
 
 def read_ids(

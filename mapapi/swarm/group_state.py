@@ -44,6 +44,15 @@ class ProposalLost(MapError):
     exit_code = 5
 
 
+class ChunkBusy(MapError):
+    """A chunk stayed held by another transaction's two-phase commit (prepared,
+    awaiting its decision) for as long as the writer could wait."""
+
+    retriable = True
+    code = 48
+    exit_code = 5
+
+
 class NotChunkLeader(MapError):
     """A proposal reached a peer that does not lead the chunk's group."""
 

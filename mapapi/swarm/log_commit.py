@@ -1,4 +1,4 @@
-"""The writer's side of a commit through a chunk's Raft log (DESIGN §13).
+"""The writer's side of a commit through the chunks' Raft logs (DESIGN §13).
 
 The writer turns its transaction into a `Proposal` for the chunk and hands it to
 the chunk's leader: itself, or the leader its group names, over the swarm port
@@ -6,24 +6,36 @@ the chunk's leader: itself, or the leader its group names, over the swarm port
 holder decides it alike, `swarm/apply.py`) answers with the commit, or with the
 conflicts as a `ConflictError`, or a rule's refusal as a `UsageError`. The
 writer's transaction then knows its commit, or can be merged and tried again.
+
+A transaction that writes several chunks commits in two phases across their
+logs: `swarm/two_phase.py` decides what to propose, this module proposes it
+(prepares one after the other, decisions in parallel) and feeds the answers back.
 """
 
 from __future__ import annotations
 
+import asyncio
+import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from mapapi.core import codec
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import ConflictError, UsageError
+from mapapi.core.errors import CommitUncertain, ConflictError, MapError, UsageError
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId, PeerId
-from mapapi.core.proposal import Proposal
+from mapapi.core.ids import ChunkId, CommitId, PeerId
+from mapapi.core.proposal import LogEntry, Proposal, TxDecision
 from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.apply import Outcome
+from mapapi.swarm.group_state import ChunkBusy, ProposalLost
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, NotChunkLeader, RaftGroups
+from mapapi.swarm.two_phase import Answer, TwoPhase
+
+RETRY_PAUSE = 0.01
+"""Seconds before a proposal is made again after "busy" or "no leader" (doubling)."""
+MAX_RETRY_PAUSE = 0.2
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,35 +69,149 @@ class LogCommits:
         self.clock = clock
         rpc.register(RaftPropose, self.rpc_raft_propose)
 
-    async def commit(self, chunk: ChunkId, tx: Transaction, message: str) -> Committed:
-        """Commit `tx`'s writes to `chunk` through the chunk's log.
+    async def commit(self, tx: Transaction, message: str) -> Committed:
+        """Commit `tx` through the logs of the chunks it writes: one proposal for
+        one chunk, a two-phase commit for several (`swarm/two_phase.py`).
 
         Raises:
             ConflictError: someone changed an item of `tx` since its begin time
                 (mergeable here: it carries `tx`).
             UsageError: a commit rule refused the changes.
-            NotChunkLeader: no leader is known yet (an election; retry).
-            RequestTimeout: no majority of the chunk's voters took the entry.
-            NetworkError: the leader could not be reached.
+            ChunkBusy: another transaction kept a chunk prepared too long.
+            NotChunkLeader: no leader was known in time (an election; retry).
+            RequestTimeout: no majority of a chunk's voters took the entry.
+            ProposalLost: a multi-chunk commit was aborted, not committed (retry).
+            CommitUncertain: a multi-chunk commit's decision could not be learnt.
+            NetworkError: a leader could not be reached.
         """
-        proposal = Proposal.of(tx, chunk, message, self.clock.tick())
-        try:
-            done = await self._propose(chunk, codec.encode_proposal(proposal))
-        except ConflictError as exc:  # received from a leader elsewhere: make it mergeable here
-            raise ConflictError(exc.conflicts, tx, exc.seen_at) from None
-        if done.record is not None:
-            self.clock.advance_to(done.record.time)
-        tx.committed(list(done.revisions))
-        return done
+        chunks = tuple(sorted({c.chunk_id for c in tx.changes}))
+        if len(chunks) < 2:
+            chunk = chunks[0] if chunks else None
+            if chunk is None:
+                return Committed(None, ())
+            outcome = await self.propose(chunk, Proposal.of(tx, chunk, message, self.clock.tick()))
+            return self._done(tx, self._raise_failure(chunk, outcome, tx))
+        time, commit_id = self.clock.tick(), CommitId.new()
+        machine = TwoPhase(
+            {c: Proposal.of(tx, c, message, time, chunks, commit_id) for c in chunks}
+        )
+        outcomes = await self._run(machine)
+        if machine.committed:
+            revisions = tuple(r for o in outcomes for r in o.revisions)
+            record = next((o.record for o in outcomes if o.record is not None), None)
+            return self._done(tx, Outcome(record, revisions))
+        if machine.uncertain and machine.decision is None:
+            raise CommitUncertain(
+                f"commit {commit_id.short} over {len(chunks)} chunks: {machine.uncertain}; "
+                "its chunks' leaders settle it from the first chunk's log"
+            )
+        if machine.conflicts:
+            raise ConflictError(list(machine.conflicts), tx, self.groups.store.raft_time(chunks[0]))
+        if machine.refusal:
+            raise UsageError(machine.refusal)
+        if machine.busy:
+            raise ChunkBusy(machine.busy)
+        raise ProposalLost(f"commit {commit_id.short} was aborted: {machine.failed}; retry")
 
-    async def _propose(self, chunk: ChunkId, data: bytes) -> Committed:
+    def _done(self, tx: Transaction, outcome: Outcome) -> Committed:
+        if outcome.record is not None:
+            self.clock.advance_to(outcome.record.time)
+        tx.committed(list(outcome.revisions))
+        return Committed(outcome.record, outcome.revisions)
+
+    async def _run(self, machine: TwoPhase) -> list[Outcome]:
+        """Drive a two-phase commit to its end; the outcomes of its decisions."""
+        decided: list[Outcome] = []
+        step = machine.start()
+        while step:
+            answers = await asyncio.gather(*(self._answer(c, e) for c, e in step))
+            step = []
+            for chunk, answer, outcome in answers:
+                if outcome is not None and outcome.decision is not None:
+                    decided.append(outcome)
+                step += machine.answered(chunk, answer)
+        return decided
+
+    async def _answer(
+        self, chunk: ChunkId, entry: LogEntry
+    ) -> tuple[ChunkId, Answer, Outcome | None]:
+        try:
+            outcome = await self.propose(chunk, entry)
+        except ChunkBusy as exc:
+            return chunk, Answer(busy=str(exc)), None
+        except MapError as exc:
+            return chunk, Answer(unknown=f"chunk {chunk.short}: {exc}"), None
+        answer = Answer(outcome.prepared, outcome.conflicts, outcome.refusal, outcome.decision)
+        return chunk, answer, outcome
+
+    async def propose(
+        self,
+        chunk: ChunkId,
+        entry: LogEntry,
+        timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+    ) -> Outcome:
+        """Have `entry` applied through `chunk`'s log, by its leader (this peer or
+        another), and return how it was decided. While the chunk has no known
+        leader, or is held by another transaction's prepare, wait and ask again,
+        up to `timeout`.
+
+        Raises:
+            ChunkBusy: the chunk stayed held by another transaction.
+            NotChunkLeader: no leader was known in time.
+            RequestTimeout, NetworkError, ProposalLost: the entry's fate is unknown.
+        """
+        data = codec.encode_entry(entry)
+        deadline = asyncio.get_running_loop().time() + timeout
+        pause = RETRY_PAUSE
+        while True:
+            try:
+                outcome = await self._propose_once(chunk, entry.commit_id, data)
+                if not outcome.busy:
+                    return outcome
+                error: MapError = ChunkBusy(
+                    f"chunk {chunk.short} stayed held by another transaction's two-phase "
+                    f"commit for {timeout:g} s; retry"
+                )
+            except NotChunkLeader as exc:
+                error = exc
+            if asyncio.get_running_loop().time() + pause > deadline:
+                raise error
+            await asyncio.sleep(pause * (0.5 + random.random()))
+            pause = min(pause * 2, MAX_RETRY_PAUSE)
+
+    async def _propose_once(self, chunk: ChunkId, commit_id: CommitId, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):
-            return self._result(chunk, (await self.groups.propose(chunk, data)).result)
+            outcome = (await self.groups.propose(chunk, data)).result
+            assert isinstance(outcome, Outcome)  # the groups apply with `apply_tx.applier`
+            return outcome
         leader = self.groups.leader(chunk)
         if leader is None:
             raise NotChunkLeader(chunk, None)
-        answer = await self.call_raft_propose(leader, chunk, data)
-        return Committed(answer.record, answer.revisions)
+        try:
+            answer = await self.call_raft_propose(leader, chunk, data)
+        except ConflictError as exc:
+            return Outcome(conflicts=tuple(exc.conflicts))
+        except UsageError as exc:
+            return Outcome(refusal=str(exc))
+        decision = TxDecision(commit_id, answer.commit, answer.time) if answer.decided else None
+        return Outcome(
+            answer.record,
+            answer.revisions,
+            busy=answer.busy,
+            prepared=answer.prepared,
+            decision=decision,
+        )
+
+    def _raise_failure(
+        self, chunk: ChunkId, outcome: Outcome, tx: Transaction | None = None
+    ) -> Outcome:
+        """`outcome`, unless it is a failure: then its error (a conflict mergeable
+        into `tx`, or a rule's refusal)."""
+        if outcome.conflicts:
+            raise ConflictError(list(outcome.conflicts), tx, self.groups.store.raft_time(chunk))
+        if outcome.refusal:
+            raise UsageError(outcome.refusal)
+        return outcome
 
     async def call_raft_propose(self, leader: PeerId, chunk: ChunkId, data: bytes) -> RaftProposed:
         """Ask `leader` to propose `data` to `chunk`'s log and wait for it to apply."""
@@ -95,26 +221,26 @@ class LogCommits:
         )
 
     async def rpc_raft_propose(self, req: Request) -> RaftProposed:
-        """Propose a writer's transaction as this chunk's leader; answer once applied.
+        """Propose a writer's entry as this chunk's leader; answer once applied.
 
         Raises:
             NotChunkLeader: this peer does not lead the chunk (the writer asks again).
-            ConflictError, UsageError: how the holders decided it.
+            ConflictError, UsageError: how the holders decided a proposal.
         """
         body: RaftPropose = req.body
         if not self.groups.is_leader(body.chunk):
             raise NotChunkLeader(body.chunk, self.groups.leader(body.chunk))
-        codec.decode_proposal(body.proposal)  # refuse what would not apply (CorruptRepoError)
-        done = self._result(
-            body.chunk, (await self.groups.propose(body.chunk, body.proposal)).result
+        codec.decode_entry(body.proposal)  # refuse what would not apply (CorruptRepoError)
+        applied = (await self.groups.propose(body.chunk, body.proposal)).result
+        assert isinstance(applied, Outcome)  # the groups apply with `apply_tx.applier`
+        outcome = self._raise_failure(body.chunk, applied)
+        d = outcome.decision
+        return RaftProposed(
+            outcome.record,
+            outcome.revisions,
+            outcome.prepared,
+            outcome.busy,
+            d is not None,
+            d is not None and d.commit,
+            0 if d is None else d.time,
         )
-        return RaftProposed(done.record, done.revisions)
-
-    def _result(self, chunk: ChunkId, outcome: object) -> Committed:
-        """The commit an applied proposal made, or the error it met."""
-        assert isinstance(outcome, Outcome)  # the groups apply with `apply.applier`
-        if outcome.conflicts:
-            raise ConflictError(list(outcome.conflicts), None, self.groups.store.raft_time(chunk))
-        if outcome.refusal:
-            raise UsageError(outcome.refusal)
-        return Committed(outcome.record, outcome.revisions)

@@ -95,7 +95,7 @@ def test_an_entry_applied_twice_is_caught() -> None:
     committed = next(
         e
         for e in reversed(sim.checker.history[: node.applied])
-        if e.kind.name == "NORMAL" and codec.decode_proposal(e.data).commit_id in node.commits
+        if e.kind.name == "NORMAL" and codec.decode_entry(e.data).commit_id in node.commits
     )
     node.applied = committed.index - 1
     with pytest.raises(Violation, match="applied twice"):

@@ -25,7 +25,8 @@ from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
-from mapapi.swarm.apply import Outcome, applier
+from mapapi.swarm.apply import Outcome
+from mapapi.swarm.apply_tx import applier
 from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.groups import Applied, NotChunkLeader, RaftGroups
 from mapapi.swarm.log_commit import LogCommits
@@ -235,7 +236,7 @@ async def increment(leader: Node, clock: LamportClock) -> int:
         proposal = Proposal(
             CommitId.new(), clock.tick(), leader.id, "w", "", "+1", begin, "snapshot", (change,)
         )
-        applied = await leader.groups.propose(CHUNK, codec.encode_proposal(proposal))
+        applied = await leader.groups.propose(CHUNK, codec.encode_entry(proposal))
         outcome = applied.result
         assert isinstance(outcome, Outcome)
         if outcome.committed:
@@ -251,7 +252,7 @@ async def test_algorithm_1_through_the_log_ends_at_a0_plus_p_times_n(world: Worl
     start = Proposal(
         CommitId.new(), clock.tick(), leader.id, "w", "", "a0", 0, "snapshot", (first,)
     )
-    await leader.groups.propose(CHUNK, codec.encode_proposal(start))
+    await leader.groups.propose(CHUNK, codec.encode_entry(start))
 
     async def writer() -> int:
         return sum([await increment(leader, clock) for _ in range(INCREMENTS)])
@@ -327,7 +328,7 @@ class Writer(Ledger):
         return self.store.scan(time, table, chunk)
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
-        return (await self.commits.commit(CHUNK, tx, message)).record
+        return (await self.commits.commit(tx, message)).record
 
 
 async def writers(world: World) -> tuple[list[Writer], Writer]:
@@ -388,7 +389,7 @@ async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
     start = Proposal(
         CommitId.new(), clock.tick(), leader.id, "w", "", "a0", 0, "snapshot", (first,)
     )
-    await leader.groups.propose(CHUNK, codec.encode_proposal(start))
+    await leader.groups.propose(CHUNK, codec.encode_entry(start))
     healthy, damaged = (n for n in nodes if n is not leader)
     for node in (healthy, damaged):
         await node.wait(lambda node=node: node.store.chain_length(CHUNK) == 1)

@@ -97,7 +97,7 @@ def test_a_proposal_survives_the_log_byte_for_byte() -> None:
         frozenset({ItemId.new()}),
         frozenset({("t", CHUNK), ("u", None)}),
     )
-    assert codec.decode_proposal(codec.encode_proposal(original)) == original
+    assert codec.decode_entry(codec.encode_entry(original)) == original
 
 
 def test_the_second_proposal_of_one_batch_is_stamped_after_the_first(store: MemoryStore) -> None:

@@ -63,10 +63,17 @@ class RaftPropose:
 
 @dataclass(frozen=True, slots=True)
 class RaftProposed:
-    """The proposal applied at the leader: its commit (None: it wrote nothing)."""
+    """The entry applied at the leader: its commit (None: it wrote nothing); for a
+    prepare, the time it reserved (`prepared`) or that the chunk is `busy`; for
+    an entry of a multi-chunk transaction the chunk decided, that decision."""
 
     record: CommitRecord | None
     revisions: tuple[Revision, ...]
+    prepared: int = 0
+    busy: bool = False
+    decided: bool = False
+    commit: bool = False
+    time: int = 0
 
 
 @dataclass(frozen=True, slots=True)

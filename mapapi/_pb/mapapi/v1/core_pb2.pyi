@@ -120,7 +120,7 @@ class ViewState(_message.Message):
     def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
 
 class CommitProposal(_message.Message):
-    __slots__ = ("commit_id", "time", "author", "author_name", "view", "message", "begin_time", "isolation", "changes", "since", "read_set", "scopes")
+    __slots__ = ("commit_id", "time", "author", "author_name", "view", "message", "begin_time", "isolation", "changes", "since", "read_set", "scopes", "participants")
     COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
     AUTHOR_FIELD_NUMBER: _ClassVar[int]
@@ -133,6 +133,7 @@ class CommitProposal(_message.Message):
     SINCE_FIELD_NUMBER: _ClassVar[int]
     READ_SET_FIELD_NUMBER: _ClassVar[int]
     SCOPES_FIELD_NUMBER: _ClassVar[int]
+    PARTICIPANTS_FIELD_NUMBER: _ClassVar[int]
     commit_id: bytes
     time: int
     author: bytes
@@ -145,7 +146,26 @@ class CommitProposal(_message.Message):
     since: _containers.RepeatedCompositeFieldContainer[ItemSince]
     read_set: _containers.RepeatedScalarFieldContainer[bytes]
     scopes: _containers.RepeatedCompositeFieldContainer[Scope]
-    def __init__(self, commit_id: _Optional[bytes] = ..., time: _Optional[int] = ..., author: _Optional[bytes] = ..., author_name: _Optional[str] = ..., view: _Optional[str] = ..., message: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., since: _Optional[_Iterable[_Union[ItemSince, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
+    participants: _containers.RepeatedScalarFieldContainer[bytes]
+    def __init__(self, commit_id: _Optional[bytes] = ..., time: _Optional[int] = ..., author: _Optional[bytes] = ..., author_name: _Optional[str] = ..., view: _Optional[str] = ..., message: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., since: _Optional[_Iterable[_Union[ItemSince, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ..., participants: _Optional[_Iterable[bytes]] = ...) -> None: ...
+
+class TxDecision(_message.Message):
+    __slots__ = ("commit_id", "commit", "time")
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    commit_id: bytes
+    commit: bool
+    time: int
+    def __init__(self, commit_id: _Optional[bytes] = ..., commit: _Optional[bool] = ..., time: _Optional[int] = ...) -> None: ...
+
+class ChunkLogEntry(_message.Message):
+    __slots__ = ("proposal", "decision")
+    PROPOSAL_FIELD_NUMBER: _ClassVar[int]
+    DECISION_FIELD_NUMBER: _ClassVar[int]
+    proposal: CommitProposal
+    decision: TxDecision
+    def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ...) -> None: ...
 
 class ItemSince(_message.Message):
     __slots__ = ("item_id", "time")

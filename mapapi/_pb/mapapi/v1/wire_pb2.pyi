@@ -571,12 +571,22 @@ class RaftPropose(_message.Message):
     def __init__(self, chunk: _Optional[bytes] = ..., proposal: _Optional[bytes] = ...) -> None: ...
 
 class RaftProposed(_message.Message):
-    __slots__ = ("record", "revisions")
+    __slots__ = ("record", "revisions", "prepared", "busy", "decided", "commit", "time")
     RECORD_FIELD_NUMBER: _ClassVar[int]
     REVISIONS_FIELD_NUMBER: _ClassVar[int]
+    PREPARED_FIELD_NUMBER: _ClassVar[int]
+    BUSY_FIELD_NUMBER: _ClassVar[int]
+    DECIDED_FIELD_NUMBER: _ClassVar[int]
+    COMMIT_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
     record: _core_pb2.CommitRecord
     revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
-    def __init__(self, record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ...) -> None: ...
+    prepared: int
+    busy: bool
+    decided: bool
+    commit: bool
+    time: int
+    def __init__(self, record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ..., prepared: _Optional[int] = ..., busy: _Optional[bool] = ..., decided: _Optional[bool] = ..., commit: _Optional[bool] = ..., time: _Optional[int] = ...) -> None: ...
 
 class ChainHead(_message.Message):
     __slots__ = ("chunk", "count", "link")
