@@ -335,7 +335,7 @@ def bench_triggers(
 
 
 @bench.command("plot")
-@click.argument("kind", type=click.Choice(["viewtest", "commit"]))
+@click.argument("kind", type=click.Choice(["viewtest", "commit", "scale"]))
 @click.argument("results", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
 @click.option(
     "-o", "--output", required=True, type=click.Path(dir_okay=False), help="The PNG to write."
@@ -344,12 +344,18 @@ def bench_plot(kind: str, results: tuple[str, ...], output: str) -> None:
     """Plot JSON results (one `--json` object per line in RESULTS) as a PNG.
 
     viewtest: commits/s and aborts per commit against peers; commit: p50/p99
-    latency and messages per commit against holders. Needs matplotlib (the
-    `dev` extra).
+    latency and messages per commit against holders; scale: seconds of each
+    read against missions held, one line per result (`bench scale --label`
+    names them). Needs matplotlib (the `dev` extra).
     """
     from mapbench.plot import load_results, plot_commit, plot_viewtest
 
     rows = load_results(results)
+    if kind == "scale":
+        from mapbench.plot_scale import plot_scale
+
+        plot_scale(rows, output)
+        return
     (plot_viewtest if kind == "viewtest" else plot_commit)(rows, output)
 
 

@@ -175,5 +175,62 @@ def bench_import(
         measures(f"bench import: {dataset} ({store})", result, as_json)
 
 
-COMMANDS = (bench_registration, bench_import)
+@click.command("scale")
+@click.option(
+    "--missions",
+    "counts",
+    default="1,10",
+    show_default=True,
+    help="Missions held when the reads are timed, comma-separated (the issue's: 1,10,100).",
+)
+@click.option(
+    "--graph",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    help="The g2o pose graph copied as every mission (default: the intel sample).",
+)
+@per_run("--runs", 3, "Timed runs of each read at each count (the median counts).")
+@click.option("--label", default="", help="Name the run in plots (e.g. before, after).")
+@DIR_OPTION
+@plot_option("seconds of each read against missions held")
+@json_option
+def bench_scale(
+    counts: str,
+    graph: Path | None,
+    runs: int,
+    label: str,
+    directory: str | None,
+    plot: str | None,
+    as_json: bool,
+) -> None:
+    """Seconds of each read command of one mission (missions, export, plot,
+    query-bbox --load, ls) as one fresh repository grows to each count of
+    missions, all copies of one real graph (issue 14: flat is the goal).
+
+    With --json, one object.
+    """
+    from mapbench.scale import DEFAULT_GRAPH, READS, measure_scale, parse_counts
+    from mapctl import render
+
+    result = measure_scale(
+        parse_counts(counts), graph or DEFAULT_GRAPH, runs=runs, directory=directory
+    )
+    if as_json:
+        render.emit_json(result)
+    else:
+        render.table(
+            f"bench scale: {result['graph']} ({result['vertices']:,} poses, "
+            f"{result['edges']:,} edges per mission), median of {runs} run(s), seconds",
+            ["missions", "store MB", *READS],
+            [
+                (p["missions"], f"{p['store_bytes'] / 1e6:.1f}", *(p["seconds"][r] for r in READS))
+                for p in result["points"]
+            ],
+        )
+    if plot:
+        from mapbench.plot_scale import plot_scale
+
+        plot_scale([result], plot)
+
+
+COMMANDS = (bench_registration, bench_import, bench_scale)
 """The commands of this module, which the `bench` group adds."""
