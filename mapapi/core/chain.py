@@ -4,9 +4,11 @@
 A link is SHA-256 over the previous link and a canonical encoding of the commit
 as it touched the chunk: its record (id, time, author, message) and its
 revisions of that chunk in item order (item, times, removal, author, and the
-payload's own digest). Holders that applied the same log hold the same head;
-a flipped byte in a stored payload, a dropped commit or a rolled-back file
-changes every link after it, so comparing heads, or recomputing the chain
+payload's own digest). The store extends the chain of every chunk a commit
+wrote as it applies the commit (`Store.apply_commit`, whichever path brought
+it), so holders that applied the same commits hold the same head; a flipped
+byte in a stored payload, a dropped commit or a rolled-back file changes every
+link after it, so comparing heads, or recomputing the chain
 from the stored revisions (`mapctl fsck`), finds it.
 """
 
@@ -14,10 +16,10 @@ from __future__ import annotations
 
 import hashlib
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId
+from mapapi.core.ids import ChunkId, CommitId
 
 GENESIS = bytes(32)
 """The link before a chunk's first commit."""
@@ -52,6 +54,47 @@ def replay(
         previous = link(previous, chunk, record, revisions)
         links.append(previous)
     return links
+
+
+def extend(
+    head_of: Callable[[ChunkId], bytes | None],
+    record: CommitRecord,
+    revisions: Sequence[Revision],
+    chunks: Iterable[ChunkId] | None = None,
+) -> list[tuple[ChunkId, bytes]]:
+    """The links one applied commit adds: one per chunk it wrote revisions of
+    (of those among `chunks`, if given), in chunk order, each after the chunk's
+    head (`head_of`, None before its first commit)."""
+    wrote = {r.chunk_id for r in revisions}
+    if chunks is not None:
+        wrote &= set(chunks)
+    return [
+        (chunk, link(head_of(chunk) or GENESIS, chunk, record, revisions))
+        for chunk in sorted(wrote)
+    ]
+
+
+def rebuild(
+    chunk: ChunkId, records: Mapping[CommitId, CommitRecord], revisions: Iterable[Revision]
+) -> list[tuple[CommitId, bytes]]:
+    """A chunk's whole chain from its stored history: (commit, link) of every
+    commit that wrote to it, in commit order (time, then id).
+
+    Commit times grow strictly along a chunk's history on every commit path (a
+    writer stamps past every holder's clock, a chunk's log past the chunk's
+    clock), so this is the order the holders applied them in, and a replica
+    rebuilt here has the chain its holders built commit by commit.
+
+    Raises:
+        KeyError: a revision's commit is not in `records`.
+    """
+    by_commit: dict[CommitId, list[Revision]] = {}
+    for revision in revisions:
+        if revision.chunk_id == chunk:
+            by_commit.setdefault(revision.commit_id, []).append(revision)
+    ordered = sorted(by_commit, key=lambda c: (records[c].time, c))
+    links = replay(chunk, [(records[c], by_commit[c]) for c in ordered])
+    return list(zip(ordered, links, strict=True))
 
 
 def _text(h: hashlib._Hash, text: str) -> None:

@@ -44,6 +44,36 @@ class TxRow:
 
 
 @dataclass(frozen=True, slots=True)
+class Divergence:
+    """Another holder's hash chain of a chunk differs from this replica's at
+    `position` (the commit's number in the chain, from 1): one of the two holds
+    another history (issue 18 §3; `swarm/chain_watch.py`)."""
+
+    chunk: ChunkId
+    peer: PeerId
+    position: int
+    detail: str
+    noticed: float  # seconds since the epoch
+
+
+@dataclass(frozen=True, slots=True)
+class Rollback:
+    """The store holds fewer commits than it had recorded holding (its
+    high-water mark, `store/mark.py`): `recorded` commit records once, `stored`
+    when it was found; `noticed` is when a write found it (0: found now)."""
+
+    recorded: int
+    stored: int
+    commit: str  # the newest commit the mark named
+    noticed: float = 0.0
+
+    @property
+    def missing(self) -> int:
+        """How many commit records the store lost."""
+        return self.recorded - self.stored
+
+
+@dataclass(frozen=True, slots=True)
 class RaftRecord:
     """What a chunk's Raft group persisted here: hard state, applied index, the
     last snapshot (index, term, config, data), the log after it, and the newest
@@ -116,7 +146,12 @@ class Store(Protocol):
 
     # commits
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
-        """Write a commit's revisions and record atomically; advances `clock()`."""
+        """Write a commit's revisions and record atomically; advances `clock()`.
+
+        In the same transaction it extends the hash chain (`core/chain.py`) of
+        each chunk whose part of the commit it writes for the first time: every
+        commit path (a lone peer's, a writer's and a holder's in the swarm, a
+        chunk's log) goes through here, so every replica links every commit."""
 
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
         """Commit records, newest first."""
@@ -211,7 +246,8 @@ class ReplicaStore(Store, Protocol):
 
     def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
         """Append a commit's link to the chunk's hash chain (inside `exclusive()`,
-        with the commit it stands for)."""
+        with the commit it stands for), unless the chain's head links that
+        commit already (`apply_commit` linked it)."""
 
     def chain_head(self, chunk_id: ChunkId) -> bytes | None:
         """The chunk's newest link, or None before its first commit through the log."""
@@ -224,6 +260,24 @@ class ReplicaStore(Store, Protocol):
 
     def chain_length(self, chunk_id: ChunkId) -> int:
         """How many commits the chunk's chain links."""
+
+    def diverged(self, found: Divergence) -> None:
+        """Record that a holder's chain differs from this replica's (kept until a
+        comparison with that holder agrees past it, or the chunk is fetched anew)."""
+
+    def agreed(self, chunk_id: ChunkId, peer: PeerId, position: int) -> None:
+        """Forget a divergence from `peer` at or before `position` of the chunk's
+        chain: the two chains agree up to there now."""
+
+    def divergences(self) -> list[Divergence]:
+        """Every recorded divergence, by chunk and peer."""
+
+    def rollbacks(self) -> list[Rollback]:
+        """How the store fell behind its own high-water mark: each rollback a write
+        found (and recorded), then one found now; empty when it never did."""
+
+    def accept_rollback(self) -> None:
+        """Forget the recorded rollbacks and mark the store as it is now."""
 
     def raft_tx(self, chunk_id: ChunkId, commit_id: CommitId) -> TxRow | None:
         """What the chunk's log recorded of a multi-chunk transaction, or None."""

@@ -7,13 +7,23 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 
+from mapapi.core import chain
 from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, TxRow, newest_first
+from mapapi.store.base import (
+    ChunkInfo,
+    Divergence,
+    IdKind,
+    LogRow,
+    RaftRecord,
+    TxRow,
+    newest_first,
+)
+from mapapi.store.memory_chain import MemoryChains
 
 
-class MemoryStore:
+class MemoryStore(MemoryChains):
     """Keeps everything in dicts; a re-entrant lock makes commits atomic."""
 
     def __init__(self) -> None:
@@ -28,6 +38,7 @@ class MemoryStore:
         self._raft: dict[ChunkId, RaftRecord] = {}
         self._tx: dict[tuple[ChunkId, CommitId], TxRow] = {}
         self._chains: dict[ChunkId, list[tuple[CommitId, bytes]]] = {}
+        self._diverged: dict[tuple[ChunkId, PeerId], Divergence] = {}
 
     def close(self) -> None:
         """Nothing to release."""
@@ -128,7 +139,16 @@ class MemoryStore:
         )
 
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
-        """Apply atomically under the lock."""
+        """Apply atomically under the lock, linking the commit into the chain of each
+        chunk whose part of it is new here (as the SQLite store)."""
+        with self._lock:
+            had = {r.chunk_id for r in self._commits.get(record.id, (record, []))[1]}
+            self._write(record, revisions)
+            fresh = {r.chunk_id for r in revisions} - had
+            for chunk, link in chain.extend(self.chain_head, record, revisions, fresh):
+                self._chains.setdefault(chunk, []).append((record.id, link))
+
+    def _write(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
         with self._lock:
             # Idempotent and additive, like the SQLite store.
             applied = self._commits.setdefault(record.id, (record, []))[1]
@@ -234,8 +254,10 @@ class MemoryStore:
             self._tables.setdefault(table, type_name)
             self._chunks.setdefault(chunk_id, table)
             for revision in revisions:
-                self.apply_commit(records[revision.commit_id], [revision])
+                self._write(records[revision.commit_id], [revision])
             self.set_holders(chunk_id, holders)
+            self._chains[chunk_id] = chain.rebuild(chunk_id, records, revisions)
+            self._diverged = {k: v for k, v in self._diverged.items() if k[0] != chunk_id}
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
         """Forget a chunk's replica."""
@@ -307,33 +329,6 @@ class MemoryStore:
     def integrity(self) -> list[str]:
         """Nothing to check in memory."""
         return []
-
-    def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
-        """Append a commit's link to the chunk's hash chain."""
-        with self._lock:
-            self._chains.setdefault(chunk_id, []).append((commit_id, link))
-
-    def chain_head(self, chunk_id: ChunkId) -> bytes | None:
-        """The chunk's newest link, or None."""
-        with self._lock:
-            chain = self._chains.get(chunk_id)
-            return chain[-1][1] if chain else None
-
-    def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
-        """Every (commit, link) of the chunk's chain, oldest first."""
-        with self._lock:
-            return list(self._chains.get(chunk_id, []))
-
-    def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
-        """The link of the chunk's `seq`-th commit, or None."""
-        with self._lock:
-            chain = self._chains.get(chunk_id, [])
-            return chain[seq - 1][1] if 0 < seq <= len(chain) else None
-
-    def chain_length(self, chunk_id: ChunkId) -> int:
-        """How many commits the chunk's chain links."""
-        with self._lock:
-            return len(self._chains.get(chunk_id, []))
 
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""

@@ -17,15 +17,17 @@ from pathlib import Path
 from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store import raft_sql, sqlite_replica, sqlite_rows, sqlite_schema
+from mapapi.store import chain_sql, raft_sql, sqlite_replica, sqlite_rows, sqlite_schema
 from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, TxRow
 from mapapi.store.file_check import check_file, storage_error
+from mapapi.store.mark import HighWater
+from mapapi.store.sqlite_chain import SqliteChains
 from mapapi.store.sqlite_connection import Connections
 from mapapi.store.sqlite_rows import COMMIT_COLUMNS as _COMMIT_COLUMNS
 from mapapi.store.sqlite_rows import REV_COLUMNS as _REV_COLUMNS
 
 
-class SqliteStore:
+class SqliteStore(SqliteChains):
     """A `Store` in one SQLite file (see the module docstring)."""
 
     def __init__(self, path: str | Path, *, create: bool = False) -> None:
@@ -41,7 +43,8 @@ class SqliteStore:
             raise CorruptRepoError(f"store file {self.path} is missing")
         if self.path.exists() and (not create or self.path.stat().st_size):
             check_file(self.path)
-        self._db = Connections(self.path)
+        self.mark = HighWater(self.path)  # `store.mark`, beside the file: see store/mark.py
+        self._db = Connections(self.path, self.mark.committed, self.mark.rolled_back)
         self._con = self._db.con
         self._write = self._db.write
         try:
@@ -184,10 +187,15 @@ class SqliteStore:
         return [self._revision(row) for row in self._con().execute(sql, [time, *args])]
 
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
-        """Write the record and its revisions in one SQL transaction."""
+        """Write the record and its revisions, and link the commit into the chain of
+        each chunk whose part of it is new here, in one SQL transaction."""
         con = self._con()
         with self._write(con):
-            sqlite_rows.write_commit(con, record, revisions)
+            self.mark.before_write(con)
+            fresh = chain_sql.unwritten(con, record, revisions)
+            if sqlite_rows.write_commit(con, record, revisions):
+                self.mark.wrote(record.id)
+            chain_sql.extend(con, record, revisions, fresh)
 
     def _revision(self, row: sqlite3.Row | tuple) -> Revision:
         return sqlite_rows.revision(self.path, row)
@@ -309,7 +317,12 @@ class SqliteStore:
         """
         con = self._con()
         with self._write(con):
+            self.mark.before_write(con)
             sqlite_replica.install(con, chunk_id, table, type_name, revisions, commits, holders)
+            chain_sql.rebuild(con, self.path, chunk_id)
+            chain_sql.forget(con, chunk_id)
+            if commits:
+                self.mark.wrote(max(commits, key=lambda c: (c.time, c.id)).id)
 
     def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
         """The persisted state of the chunk's Raft group, or None."""
@@ -338,28 +351,6 @@ class SqliteStore:
         """SQLite's own check of the file (`PRAGMA quick_check`); empty when sound."""
         rows = [str(r[0]) for r in self._con().execute("PRAGMA quick_check")]
         return [] if rows == ["ok"] else [f"{self.path}: {r}" for r in rows]
-
-    def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
-        """Append a commit's link to the chunk's hash chain (joins `exclusive()`)."""
-        con = self._con()
-        with self._write(con):
-            raft_sql.add_link(con, chunk_id, commit_id, link)
-
-    def chain_head(self, chunk_id: ChunkId) -> bytes | None:
-        """The chunk's newest link, or None."""
-        return raft_sql.head(self._con(), chunk_id)
-
-    def chain_links(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
-        """Every (commit, link) of the chunk's chain, oldest first."""
-        return [(CommitId(c), link) for c, link in raft_sql.links(self._con(), chunk_id)]
-
-    def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
-        """The link of the chunk's `seq`-th commit, or None."""
-        return raft_sql.link_at(self._con(), chunk_id, seq)
-
-    def chain_length(self, chunk_id: ChunkId) -> int:
-        """How many commits the chunk's chain links."""
-        return raft_sql.length(self._con(), chunk_id)
 
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sqlite3
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -20,10 +20,23 @@ BUSY_TIMEOUT_MS = 30_000
 
 
 class Connections:
-    """Every thread's connection to the store file at `path`."""
+    """Every thread's connection to the store file at `path`.
 
-    def __init__(self, path: Path) -> None:
+    Args:
+        on_commit: called with the connection after each outermost write
+            transaction commits (not after one that rolls back).
+        on_rollback: called after one rolls back.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        on_commit: Callable[[sqlite3.Connection], None] | None = None,
+        on_rollback: Callable[[], None] | None = None,
+    ) -> None:
         self.path = path
+        self._on_commit = on_commit
+        self._on_rollback = on_rollback
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._all_lock = threading.Lock()
@@ -66,11 +79,15 @@ class Connections:
         except BaseException as exc:
             if con.in_transaction:  # on a full disk SQLite may have rolled back already
                 con.execute("ROLLBACK")
+            if self._on_rollback is not None:
+                self._on_rollback()
             if isinstance(exc, sqlite3.Error) and (honest := storage_error(self.path, exc)):
                 raise honest from exc
             raise
         finally:
             self._local.depth = 0
+        if self._on_commit is not None:
+            self._on_commit(con)
 
     def close(self) -> None:
         """Close every connection opened by any thread."""

@@ -63,11 +63,13 @@ def _damaged_row(path: Path, what: str, exc: Exception) -> CorruptRepoError:
 
 def write_commit(
     con: sqlite3.Connection, record: CommitRecord, revisions: Sequence[Revision]
-) -> None:
-    """Write the record and its revisions (inside the caller's write transaction)."""
+) -> bool:
+    """Write the record and its revisions (inside the caller's write transaction);
+    whether the record is new here (then the store's count of the commit records
+    it wrote, `meta` "applied", grows by one: see `store/mark.py`)."""
     # Idempotent and additive: a commit that spans chunks reaches a holder
     # as one batch per chunk, each applied on its own.
-    con.execute(
+    new = con.execute(
         f"INSERT OR IGNORE INTO commits ({COMMIT_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
         (
             record.id,
@@ -78,7 +80,7 @@ def write_commit(
             record.author_name,
             record.view,
         ),
-    )
+    ).rowcount == 1
     # In primary-key order: random ids inserted as they come touch pages all
     # over the table's B-tree; sorted, a large commit writes in half the time.
     con.executemany(
@@ -104,6 +106,9 @@ def write_commit(
         "UPDATE meta SET value = MAX(CAST(value AS INTEGER), ?) WHERE key = 'clock'",
         (record.time,),
     )
+    if new:
+        con.execute("UPDATE meta SET value = CAST(value AS INTEGER) + 1 WHERE key = 'applied'")
+    return new
 
 
 def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import sqlite3
 
-from mapapi.store import raft_sql
+from mapapi.store import chain_sql, raft_sql
 from mapapi.store.file_check import check_schema
+from mapapi.store.mark import APPLIED
 from mapapi.store.sqlite_connection import Connections
 
 FORMAT = "mapapi-store"
@@ -67,22 +68,44 @@ def setup(db: Connections, create: bool) -> None:
                 if statement.strip():
                     con.execute(statement)
             con.execute(
-                "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('version', ?), ('clock', '0')",
-                (FORMAT, str(SCHEMA_VERSION)),
+                "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('version', ?), ('clock', '0'), "
+                "(?, '0'), (?, '1')",
+                (FORMAT, str(SCHEMA_VERSION), APPLIED, chain_sql.LINKED),
             )
     _add_columns(db, con)
-    _add_raft_tables(db, con)
-    check_schema(con, db.path, _SCHEMA + raft_sql.RAFT_SCHEMA, FORMAT, SCHEMA_VERSION)
+    _add_tables(db, con, raft_sql.RAFT_SCHEMA, raft_sql.RAFT_TABLES)
+    _add_tables(db, con, chain_sql.CHAIN_SCHEMA, chain_sql.CHAIN_TABLES)
+    _link_commits(db, con)
+    schema = _SCHEMA + raft_sql.RAFT_SCHEMA + chain_sql.CHAIN_SCHEMA
+    check_schema(con, db.path, schema, FORMAT, SCHEMA_VERSION)
 
 
-def _add_raft_tables(db: Connections, con: sqlite3.Connection) -> None:
-    """Give a mapapi store written before Raft its group tables (no write
-    transaction when they are there: most opens are reads)."""
+def _link_commits(db: Connections, con: sqlite3.Connection) -> None:
+    """Bring a store written before every commit was linked and counted up to date,
+    once: its count of commit records (`store/mark.py`) starts at the records it
+    holds, and every chunk gets its hash chain (`chain_sql.link_all`)."""
     tables = _tables_if_ours(con)
-    if tables is None or tables.issuperset(raft_sql.RAFT_TABLES):
-        return  # not ours (check_schema refuses it untouched), or up to date
+    if tables is None or not {"commits", "chunks", "revisions", "raft_chain"} <= tables:
+        return  # check_schema refuses it
+    wanted = (APPLIED, chain_sql.LINKED)
+    keys = {r[0] for r in con.execute("SELECT key FROM meta WHERE key IN (?, ?)", wanted)}
+    if keys == set(wanted):
+        return
     with db.write(con):
-        for statement in raft_sql.RAFT_SCHEMA.split(";"):
+        con.execute("INSERT OR IGNORE INTO meta SELECT ?, COUNT(*) FROM commits", (APPLIED,))
+        chain_sql.link_all(con, db.path)
+
+
+def _add_tables(
+    db: Connections, con: sqlite3.Connection, schema: str, names: tuple[str, ...]
+) -> None:
+    """Give a mapapi store the tables of `schema` (`names`) it lacks (no write
+    transaction when it has them)."""
+    tables = _tables_if_ours(con)
+    if tables is None or tables.issuperset(names):
+        return
+    with db.write(con):
+        for statement in schema.split(";"):
             if statement.strip():
                 con.execute(statement)
 

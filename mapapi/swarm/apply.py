@@ -10,8 +10,9 @@ commit rules the application gave at construction (every holder runs the same
 application).
 
 Each commit extends the chunk's hash chain (`core/chain.py`) in the same
-transaction, so holders that applied the same log hold the same head, and a
-store changed behind their back no longer matches its chain (`chain_check`).
+transaction (`Store.apply_commit` links every commit, whichever path applies
+it), so holders that applied the same log hold the same head, and a store
+changed behind their back no longer matches its chain (`chain_check`).
 
 The commit's time is the proposal's Lamport time, raised to one past the
 chunk's clock (including commits applied earlier in the same batch) when a
@@ -24,7 +25,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from mapapi.core import chain
 from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
@@ -139,10 +139,9 @@ def decide(
 def write_commit(
     store: ReplicaStore, chunk: ChunkId, record: CommitRecord, revisions: Sequence[Revision]
 ) -> None:
-    """Write a commit's revisions of `chunk` and extend the chunk's hash chain."""
+    """Write a commit's revisions of `chunk`; the store extends the chunk's hash
+    chain with it in the same transaction (`Store.apply_commit`)."""
     store.apply_commit(record, revisions)
-    previous = store.chain_head(chunk) or chain.GENESIS
-    store.chain_link(chunk, record.id, chain.link(previous, chunk, record, revisions))
 
 
 def chunk_clock(store: ReplicaStore, chunk: ChunkId) -> int:
