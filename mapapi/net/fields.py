@@ -2,9 +2,10 @@
 
 A body dataclass mirrors its wire message field by field (same names). Ids
 travel as 16 bytes (empty for None); `Revision` and `CommitRecord` use the
-storage codec; nested dataclasses (`Member`, `TableInfo`) and tuples of any of
-these recurse. Anything malformed on the way in raises ValueError, which the
-envelope decoder turns into ProtocolError; so does a field over its limit in
+storage codec, and an optional one (`X | None`) is an unset field when None;
+nested dataclasses (`Member`, `TableInfo`) and tuples of any of these recurse.
+Anything malformed on the way in raises ValueError, which the envelope decoder
+turns into ProtocolError; so does a field over its limit in
 `mapapi.core.limits` (`LimitExceeded` is a ValueError), checked on the protobuf
 message before any dataclass is built from it.
 """
@@ -47,7 +48,9 @@ def fill(body: Any, message: Any) -> None:
     message.SetInParent()  # an empty body must still select its oneof field
     for name, hint in _hints(type(body)).items():
         value = getattr(body, name)
-        kind, _ = _optional(hint)
+        kind, nullable = _optional(hint)
+        if value is None and nullable and not (isinstance(kind, type) and issubclass(kind, Id)):
+            continue  # an optional message stays unset
         if typing.get_origin(kind) is tuple:
             (element,) = [a for a in typing.get_args(kind) if a is not Ellipsis]
             repeated = getattr(message, name)
@@ -100,6 +103,8 @@ def read(cls: type, message: Any) -> Any:
             values[name] = tuple(_read_value(element, item) for item in raw)
         elif isinstance(kind, type) and issubclass(kind, Id):
             values[name] = None if nullable and not raw else kind.from_bytes(raw)
+        elif nullable and not message.HasField(name):
+            values[name] = None
         else:
             if isinstance(raw, str | bytes):
                 limits.field(name, raw)
