@@ -270,9 +270,22 @@ def fsck_report(report: dict[str, Any]) -> None:
         f"{report['store']}: file {'sound' if not report['integrity'] else 'DAMAGED'}, "
         f"{payloads['checked']} payload(s), {chains['checked']} chain(s) checked"
     )
-    for problem in [*report["integrity"], *payloads["bad"], *chains["problems"]]:
+    for problem in [
+        *report["integrity"],
+        *payloads["bad"],
+        *chains["problems"],
+        *report["rollback"]["problems"],
+        *(d["detail"] for d in report["diverged"]),
+    ]:
         line(f"  {problem}", "red")
     line("no problem found" if report["ok"] else "problems found: see above", "bold")
+
+
+def history_warnings(info: dict[str, Any]) -> None:
+    """`mapctl peer status`: a chunk whose history differs from another holder's,
+    or a store behind its high-water mark, one red line each (issue 18 §3)."""
+    for problem in [*(d["detail"] for d in info["diverged"]), *info["rollback"]]:
+        line(f"  {problem}", "red")
 
 
 def measures(title: str, result: dict[str, Any], as_json: bool) -> None:

@@ -23,6 +23,7 @@ from mapapi.core.transaction import Isolation, Transaction
 from mapapi.lookup.chunk_places import ChunkPlaces
 from mapapi.lookup.spatial import BBox, SpatialGrid
 from mapapi.lookup.spatial_index import QueryStats
+from mapapi.service.fsck import rollback_text
 from mapapi.service.repo import Repository
 from mapapi.service.tables import Tables
 from mapapi.store import ChunkInfo, MemoryStore
@@ -169,6 +170,8 @@ class Peer:
         )
         address = await swarm.start(listen)
         self.swarm = swarm
+        for lost in self.store.rollbacks():  # loudly, at every start until accepted
+            log.error("%s", rollback_text(lost))
         return address
 
     def _on_swarm(self) -> Swarm:
@@ -192,8 +195,9 @@ class Peer:
 
     async def rejoin(self) -> list[ChunkId]:
         """Hold again the chunks this peer shared before it stopped, catching up on
-        what the others committed meanwhile; returns those chunks."""
-        return await self._on_swarm().replicator.rejoin()
+        what the others committed meanwhile, and compare their hash chains with the
+        other holders' at once; returns those chunks."""
+        return await self._on_swarm().rejoin()
 
     def members(self) -> list[MemberState]:
         """The other members of the swarm, with when each was last heard of."""

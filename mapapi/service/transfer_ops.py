@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from mapapi.core.errors import PeerNotRunning, UsageError
 from mapapi.core.ids import ChunkId
 from mapapi.lookup.spatial import BBox
+from mapapi.service.fsck import divergence_json, rollback_text
 from mapapi.service.ops import Operation, check_address, resolve_id
 
 if TYPE_CHECKING:
@@ -75,7 +76,9 @@ class SwarmOperations:
         }
 
     async def peer_status(self) -> Json:
-        """This peer: id, name, the address others join through, every member."""
+        """This peer: id, name, the address others join through, every member; the
+        chunks whose hash chain differs from another holder's, and how far the store
+        fell behind its high-water mark (issue 18 §3)."""
         peer = online(self.peer)
         assert peer.swarm is not None
         members = [
@@ -89,6 +92,8 @@ class SwarmOperations:
             "pid": os.getpid(),
             "members": members,
             "chunks": len(peer.chunks()),
+            "diverged": [divergence_json(d) for d in peer.store.divergences()],
+            "rollback": [rollback_text(r) for r in peer.store.rollbacks()],
         }
 
     async def peers(self) -> Json:

@@ -2,9 +2,10 @@
 
 Every commit applied from a chunk's log left a link (`core/chain.py`).
 `check_chain` recomputes each link from the commit's record and revisions as
-stored now: a payload changed on disk, a commit gone (a rolled-back file) or a
-link that does not follow from the one before is reported, never repaired
-silently. Holders compare their heads with `chain_watch.ChainWatch`.
+stored now: a payload changed on disk, a commit gone (a rolled-back file), a
+link that does not follow from the one before, or a commit of the chunk with no
+link (written into the file behind the store's back) is reported, never
+repaired silently. Holders compare their heads with `chain_watch.ChainWatch`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:
     """What is wrong with `chunk`'s history against its chain; empty when sound."""
     problems: list[str] = []
     previous = chain.GENESIS
-    for commit_id, stored in store.chain_links(chunk):
+    links = store.chain_links(chunk)
+    for commit_id, stored in links:
         record = store.commit_record(commit_id)
         if record is None:
             problems.append(
@@ -34,4 +36,11 @@ def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:
                 "(its record or data changed after it was written)"
             )
         previous = stored
+    linked = {commit_id for commit_id, _ in links}
+    for record in store.chunk_commits(chunk):
+        if record.id not in linked:
+            problems.append(
+                f"chunk {chunk.short}: commit {record.id.short} is in its history but not in "
+                "its chain (it was written into the store behind its back)"
+            )
     return problems

@@ -6,7 +6,9 @@ and `Peer.close()` closes it. Membership is simple: a joiner says Hello to any
 member, learns every member from the Welcome, and says Hello to each of them;
 a graceful leave says Bye to all (DESIGN §6). Every peer is also a node of
 the Chord ring over the same endpoint (DESIGN §7): it joins the ring with the
-swarm and hands its keys over when it leaves.
+swarm and hands its keys over when it leaves. It compares the hash chains of
+the chunks it shares with their other holders (`ChainWatch`, issue 18 §3) now
+and then, and at once after a rejoin.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from mapapi.net.security import Security, own_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.liveness import Liveness, LivenessOptions
 from mapapi.swarm.lock import Grant
 from mapapi.swarm.lock_client import LockService
@@ -125,6 +128,10 @@ class Swarm:
         self.recovery = Recovery(
             self.rpc, self.members, self.locks, store, self.replicator, self.liveness
         )
+        self._store = store
+        self.chains = ChainWatch(
+            store, self.rpc, self.members.address, self._shared_chunks, self._other_holders
+        )
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))
@@ -147,6 +154,16 @@ class Swarm:
 
     def _not_holder(self, chunk: ChunkId, holder: PeerId) -> None:
         self.recovery.not_holder(chunk, holder)
+
+    def _shared_chunks(self) -> list[ChunkId]:
+        """The chunks this peer holds with others (their chains are compared)."""
+        me = self._peer_id
+        return [c for c, hs in self._store.holdings().items() if me in hs and len(hs) > 1]
+
+    def _other_holders(self, chunk: ChunkId) -> list[PeerId]:
+        """The other holders of a chunk this peer holds (none if it does not)."""
+        holders = self._store.holders(chunk)
+        return [p for p in holders if p != self._peer_id] if self._peer_id in holders else []
 
     def peer_down(self, peer: PeerId) -> None:
         """`LivenessEvents`: wake the writers queued behind `peer`'s locks."""
@@ -191,6 +208,7 @@ class Swarm:
         )
         self.subscriptions.start(self._chord, self.grid)
         self.liveness.start()
+        self.chains.start()
         self._merging = asyncio.get_running_loop().create_task(self._merge_rings(), name="merge")
         return address
 
@@ -308,6 +326,13 @@ class Swarm:
                 log.warning("not on the lookup ring: chunks are found by asking the members")
         await self.replicator.refresh()
 
+    async def rejoin(self) -> list[ChunkId]:
+        """Hold again the chunks this peer shared when it stopped (`Replicator.rejoin`),
+        then compare their chains with the other holders' at once; returns them."""
+        back = await self.replicator.rejoin()
+        await self.chains.compare(back)
+        return back
+
     async def leave(self) -> None:
         """Withdraw this peer's holder registrations, hand its keys of the ring
         over to its successor, and say Bye to every other member (best effort,
@@ -332,6 +357,7 @@ class Swarm:
         if self._merging is not None:
             self._merging.cancel()
             await asyncio.gather(self._merging, return_exceptions=True)
+        await self.chains.close()
         await self.liveness.close()
         await self.recovery.close()
         await self.replicator.close()

@@ -12,14 +12,16 @@ also answers `ChunkListQuery` (lookup by peer).
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from mapapi.core import limits
+from mapapi.core import chain, limits
 from mapapi.core.errors import (
     ChunkNotFound,
+    CorruptRepoError,
     LockNotHeld,
     MapError,
     NoPeersError,
@@ -68,6 +70,26 @@ PROBE_TIMEOUT = 2.0  # seconds a holder has to answer a ping before it is asked 
 Progress = Callable[[int, int], None]  # (parts received, parts in all)
 HOLDER_TTL = 30.0
 """Seconds a holder registration in the Chord index lives unless its owner refreshes it."""
+
+
+def _replaced(
+    chunk: ChunkId,
+    before: list[tuple[CommitId, bytes]],
+    after: list[tuple[CommitId, bytes]],
+    sender: PeerId,
+) -> None:
+    """Say so when a fetched replica replaced a history it does not extend: commits
+    this replica held alone (never decided by the swarm), or another history."""
+    if after[: len(before)] == before:
+        return
+    gone = {c for c, _ in before} - {c for c, _ in after}
+    log.warning(
+        "chunk %s: the replica fetched from %s replaced this one's history, which it does "
+        "not extend (%d commit(s) held here are not in it)",
+        chunk.short,
+        sender.short,
+        len(gone),
+    )
 
 
 def encode_holder(member: Member) -> bytes:
@@ -339,6 +361,7 @@ class Replicator:
     ) -> None:
         revisions = self.store.chunk_revisions(chunk)
         commits = {c.id: c for c in self.store.chunk_commits(chunk)}
+        await self._check_history(chunk, commits, revisions)
         info = TableInfo(table, self.store.tables()[table])
         members = tuple(self._member(p) for p in holders)
         pieces = [
@@ -350,6 +373,26 @@ class Replicator:
             records = tuple(commits[c] for c in sorted({r.commit_id for r in piece}))
             part = ChunkPart(chunk, info, members, tuple(piece), records, index, len(pieces))
             await self.call_chunk_part(address, part)
+
+    async def _check_history(
+        self, chunk: ChunkId, commits: dict[CommitId, CommitRecord], revisions: list[Revision]
+    ) -> None:
+        """Refuse to hand out a replica whose history no longer matches its hash chain:
+        the newcomer rebuilds the chain from the history it receives (`install_chunk`),
+        so what is sent must be what the chain says (issue 18 §3).
+
+        Raises:
+            CorruptRepoError: it does not (logged here; the newcomer asks another holder).
+        """
+        rebuilt = await asyncio.to_thread(chain.rebuild, chunk, commits, revisions)
+        if rebuilt == self.store.chain_links(chunk):
+            return
+        problem = (
+            f"chunk {chunk.short}: the history of this replica no longer matches its hash "
+            f"chain, so it is not sent to another peer; run `mapctl fsck` on peer {self.me.short}"
+        )
+        log.error("%s", problem)
+        raise CorruptRepoError(problem)
 
     async def call_chunk_part(self, address: str, part: ChunkPart) -> None:
         """Send one part of a chunk's state to the newcomer at `address`."""
@@ -380,6 +423,7 @@ class Replicator:
         for member in part.holders:
             if member.id != self.me and member.address:
                 self.members.add(member)
+        before = self.store.chain_links(part.chunk)
         self.store.install_chunk(
             part.chunk,
             part.table.name,
@@ -388,6 +432,7 @@ class Replicator:
             list({c.id: c for p in parts for c in p.commits}.values()),
             [m.id for m in part.holders],
         )
+        _replaced(part.chunk, before, self.store.chain_links(part.chunk), req.sender)
         if self.places is not None:
             self.places.forget(part.chunk)  # replaced wholesale
         # Batches still in doubt here are settled in the state just installed

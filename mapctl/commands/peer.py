@@ -144,6 +144,7 @@ def peer_status(session: Session, as_json: bool) -> None:
         render.line(f"  join:    {info['join']}")
         render.line(f"  control: {info['control']}")
         render.line(f"  swarm:   {len(info['members'])} member(s), {info['chunks']} chunk(s) here")
+        render.history_warnings(info)
 
 
 def _ago(seconds: float | None) -> str:

@@ -202,15 +202,22 @@ def chunk_list(
 
 
 @click.command("fsck")
+@click.option(
+    "--accept",
+    is_flag=True,
+    help="Accept a rollback the store went through (the lost commits stay lost): "
+    "forget it and record the store as it is now.",
+)
 @json_option
 @pass_session
-def fsck(session: Session, as_json: bool) -> None:
-    """Check the store: the SQLite file, every payload, every chunk's hash chain.
+def fsck(session: Session, accept: bool, as_json: bool) -> None:
+    """Check the store: the SQLite file, every payload, every chunk's hash chain, its
+    high-water mark (a rolled-back store) and what other holders' chains showed.
 
     Exits 1 when anything is wrong (after the report), 0 when all is sound."""
     from mapctl import render
 
-    report = session.call("fsck")
+    report = session.call("fsck", accept=accept)
     if as_json:
         render.emit_json(report)
     else:

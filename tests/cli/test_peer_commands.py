@@ -150,6 +150,8 @@ class TestThroughTheDaemon:
             "pid": record.pid,
             "members": [{"id": record.id, "address": record.address, "name": "bench"}],
             "chunks": 0,
+            "diverged": [],
+            "rollback": [],
             "control": record.control,
         }
         assert await daemon.json("peers") == {"peers": []}

@@ -266,8 +266,13 @@ async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
     con.execute("UPDATE raft_chain SET link = ? WHERE seq = 1", (b"\x01" * 32,))
     con.commit()
     con.close()
-    watches = {n.id: ChainWatch(n.groups, n.rpc, world.addresses.__getitem__) for n in nodes}
-    watches[leader.id].announce()
-    await damaged.wait(lambda: CHUNK in watches[damaged.id].diverged)
+    watches = {  # the Raft groups say what to compare: a leader's chunks, with their members
+        n.id: ChainWatch(
+            n.store, n.rpc, world.addresses.__getitem__, n.groups.led, n.groups.members
+        )
+        for n in nodes
+    }
+    await watches[leader.id].compare()
     assert "another history" in watches[damaged.id].diverged[CHUNK]
+    assert [d.peer for d in leader.store.divergences()] == [damaged.id]  # both sides see it
     assert watches[healthy.id].diverged == {}
