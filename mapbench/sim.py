@@ -11,7 +11,8 @@ Two workloads (`mapbench.sim_clients`): the pure core's (clients propose opaque 
 transfers the simulator applies itself), and the commit path's (`commits=True`): each node holds
 a real `MemoryStore` replica of the chunk, clients begin at a node's chunk clock, read, and
 propose encoded `Proposal`s that every node decides with `apply_proposal`, as real writers and
-holders do. `run_seeds` runs many seeds for `mapctl bench sim`; `tests/sim` runs them in CI.
+holders do. Transactions over two chunks have their own simulation (`mapbench.sim_tx`).
+`run_seeds` runs many seeds of each for `mapctl bench sim`; `tests/sim` runs them in CI.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from mapapi.swarm.raft_types import (
     Role,
 )
 from mapbench.sim_clients import CommitWorkload, CounterWorkload, Workload
+from mapbench.sim_tx import TxSim
 from mapbench.sim_world import (
     SIM_OPTIONS,
     TICK,
@@ -445,10 +447,11 @@ def replay_command(seed: int) -> str:
 
 
 def run_seeds(
-    first: int, count: int, modes: tuple[str, ...] = ("core", "commits")
+    first: int, count: int, modes: tuple[str, ...] = ("core", "commits", "tx")
 ) -> dict[str, Any]:
     """Run seeds `first` .. `first + count - 1` in each mode ("core": the pure Raft core's
-    counter; "commits": the commit path on stores); violations and summed counts.
+    counter; "commits": the commit path on stores; "tx": transactions over two chunks,
+    `mapbench.sim_tx`); violations and summed counts.
 
     Nothing here asserts: a violation is reported with its replay command.
     """
@@ -457,7 +460,7 @@ def run_seeds(
     violations: list[dict[str, Any]] = []
     for mode in modes:
         for seed in range(first, first + count):
-            sim = Sim(seed, commits=mode == "commits")
+            sim: Sim | TxSim = TxSim(seed) if mode == "tx" else Sim(seed, commits=mode == "commits")
             try:
                 sim.run()
             except Violation as err:

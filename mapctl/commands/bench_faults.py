@@ -125,14 +125,15 @@ def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_
 @click.option("--first", default=0, show_default=True, type=click.IntRange(0), help="First seed.")
 @click.option(
     "--mode",
-    type=click.Choice(["core", "commits", "both"]),
-    default="both",
+    type=click.Choice(["core", "commits", "tx", "all"]),
+    default="all",
     show_default=True,
-    help="The pure Raft core's counter, the commit path on stores, or both.",
+    help="The pure Raft core's counter, the commit path on stores, transactions over "
+    "two chunks (two-phase commit), or all three.",
 )
 @json_option
 def bench_sim(seeds: int, first: int, mode: str, as_json: bool) -> None:
-    """Deterministic simulation of a chunk's Raft group under faults (DESIGN §13):
+    """Deterministic simulation of chunks' Raft groups under faults (DESIGN §13):
     seeds FIRST .. FIRST+SEEDS-1, each in one thread with a simulated network and clock.
 
     Reports violations (each with the command that replays its seed) and what
@@ -141,7 +142,7 @@ def bench_sim(seeds: int, first: int, mode: str, as_json: bool) -> None:
     from mapbench.sim import run_seeds
     from mapctl import render
 
-    modes = ("core", "commits") if mode == "both" else (mode,)
+    modes = ("core", "commits", "tx") if mode == "all" else (mode,)
     result = run_seeds(first, seeds, modes)
     if as_json:
         render.emit_json(result)
