@@ -6,7 +6,10 @@ peer daemon its peer and operations factories, as constructor arguments. This
 module gives them the application's, and is what `mapctl`, `mapapi.testing`
 and the benchmarks build peers and daemons with, so the mission rules (a vertex
 index is unique in its mission, an edge's ends exist) hold wherever map data is
-written through them. A script that builds a bare `Peer` writes without them.
+written through them, and their SQLite stores index and summarise every
+mission's rows (`maps.labels`). A script that builds a bare `Peer` writes
+without the rules, and reads missions by reading whole tables (a store it wrote
+to is labelled again when a peer built here next opens it).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mapapi.maps.labels import map_labels
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.rules import map_rules
 from mapapi.service import daemon, daemon_process
@@ -33,8 +37,9 @@ if TYPE_CHECKING:
 
 
 def peer_of(repo: Repository) -> Peer:
-    """The peer of `repo`, keeping the map tables' rules at every commit."""
-    return Peer.of(repo, rules=map_rules())
+    """The peer of `repo`, keeping the map tables' rules at every commit, and
+    their labels (each mission's rows indexed and summarised) in its store."""
+    return Peer.of(repo, rules=map_rules(), labels=map_labels())
 
 
 def open_peer(path: str | Path = ".") -> Peer:

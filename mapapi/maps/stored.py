@@ -1,7 +1,10 @@
 """Read stored missions back: their names, a summary of each, a graph or a cloud.
 
-Everything here reads through one transaction, so a listing or a mission is
-consistent as of one logical time even while others commit.
+A mission's rows are read by its label (`mapapi.maps.labels`): through the
+store's label index, only that mission's rows are read, however many missions
+the store holds. Reads of rows go through one transaction, so a mission is
+consistent as of one logical time even while others commit; the listing's
+counts and boxes are the summaries the store keeps up to date at every commit.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud, cloud_from_blocks
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import MissionGraph, Origin
+from mapapi.maps.labels import MAP_LABELS
 from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
@@ -75,14 +79,17 @@ async def mission_names(tx: Transaction) -> set[str]:
 
 
 async def _rows_of(peer: Peer, tx: Transaction, table: str, mission: str) -> list[Any]:
-    if table not in peer.tables():
+    """The mission's rows of `table` that `tx` sees, decoded, by id."""
+    if table not in peer.store.tables():
         return []
-    return [m for m in (await tx.items(table)).values() if getattr(m, "mission", "") == mission]
+    decode = peer.table(table).decode
+    return [
+        decode(r.data) for r in await peer.scan_labelled(tx.begin_time, MAP_LABELS, mission, table)
+    ]
 
 
 async def _mission_row(peer: Peer, tx: Transaction, mission: str) -> Any:
-    rows = (await tx.items(MISSIONS)).values() if MISSIONS in peer.tables() else []
-    found = [m for m in rows if getattr(m, "name", "") == mission]
+    found = await _rows_of(peer, tx, MISSIONS, mission)
     if not found:
         raise MapImportError(
             f"no mission {mission!r} here; `mapctl missions` lists them, "
@@ -123,16 +130,15 @@ async def _in_order(
 ) -> list[tuple[tuple[int, int, int, str], Any]]:
     """The mission's rows of `table` with their sort keys: (insertion time,
     line, index (vertices), id)."""
-    if table not in peer.tables():
+    if table not in peer.store.tables():
         return []
     decode = peer.table(table).decode
     rows = []
-    for revision in await peer.scan(tx.begin_time, table, None):
+    for revision in await peer.scan_labelled(tx.begin_time, MAP_LABELS, mission, table):
         message: Any = decode(revision.data)
-        if message.mission == mission:
-            index = message.index if table == VERTICES else 0
-            key = (revision.insert_time, message.origin.line, index, str(revision.item_id))
-            rows.append((key, message))
+        index = message.index if table == VERTICES else 0
+        key = (revision.insert_time, message.origin.line, index, str(revision.item_id))
+        rows.append((key, message))
     return rows
 
 
@@ -152,10 +158,10 @@ async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str
     """Mission name -> {table: chunk} for the missions of `names` held here, as
     their rows name them (rows written before rows named their chunks name none)."""
     wanted = set(names)
-    if not wanted or MISSIONS not in peer.tables():
+    if not wanted or MISSIONS not in peer.store.tables():
         return {}
     async with reading(peer) as tx:
-        rows = [m for m in (await tx.items(MISSIONS)).values() if m.name in wanted]
+        rows = [row for name in sorted(wanted) for row in await _rows_of(peer, tx, MISSIONS, name)]
     found: dict[str, dict[str, ChunkId]] = {}
     for row in rows:
         found[row.name] = {}
@@ -168,41 +174,39 @@ async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str
 
 
 async def list_missions(peer: Peer) -> list[MissionInfo]:
-    """Every mission held here, by name, with its counts, chunks and holders."""
+    """Every mission held here, by name, with its counts, box, chunks and holders.
+
+    Reads one row per mission (its mission row) and the summaries the store
+    keeps per mission and chunk (`Peer.label_summaries`): counts are of the
+    rows held here, and the box is the one around the vertices, landmarks and
+    point blocks held here (the mission row's box when none is held)."""
+    if MISSIONS not in peer.store.tables():
+        return []
     async with reading(peer) as tx:
-        infos = await _summaries(peer, tx)
-    for info in infos.values():
-        chunk = info.chunks.get(MISSIONS)
-        info.holders = peer.holders(chunk) if chunk is not None else []
-    return [infos[name] for name in sorted(infos)]
-
-
-async def _summaries(peer: Peer, tx: Transaction) -> dict[str, MissionInfo]:
+        rows = await peer.scan(tx.begin_time, MISSIONS, None)
+    decode = peer.table(MISSIONS).decode
     infos: dict[str, MissionInfo] = {}
-    for chunk, row in await _by_chunk(peer, tx, MISSIONS):
+    for revision in rows:
+        row: Any = decode(revision.data)
         box = box_from_pb(row.bbox) if row.HasField("bbox") else None
         infos[row.name] = MissionInfo(row.name, row.robot, row.frame, box)
-        infos[row.name].chunks[MISSIONS] = chunk
-    for table in (VERTICES, EDGES, CLOUDS):
-        for chunk, row in await _by_chunk(peer, tx, table):
-            info = infos.get(row.mission)
-            if info is None:
-                continue  # rows whose mission row is not held here
-            info.chunks.setdefault(table, chunk)
-            if table == VERTICES:
-                info.vertices += 1
-            elif table == EDGES:
-                info.edges += 1
-            else:
-                info.points += row.count
-    return infos
-
-
-async def _by_chunk(peer: Peer, tx: Transaction, table: str) -> list[tuple[ChunkId, Any]]:
-    """Every (chunk, row) of `table` held here."""
-    if table not in peer.tables():
-        return []
-    rows: list[tuple[ChunkId, Any]] = []
-    for info in peer.chunks(table):
-        rows += [(info.id, m) for m in (await tx.items(table, info.id)).values()]
-    return rows
+        infos[row.name].chunks[MISSIONS] = revision.chunk_id
+    boxes: dict[str, list[BBox]] = {}
+    for summary in peer.label_summaries(MAP_LABELS):
+        info = infos.get(summary.label)
+        if info is None or summary.table == MISSIONS:
+            continue  # rows whose mission row is not held here
+        info.chunks.setdefault(summary.table, summary.chunk)
+        if summary.table == VERTICES:
+            info.vertices += summary.items
+        elif summary.table == EDGES:
+            info.edges += summary.items
+        elif summary.table == CLOUDS:
+            info.points += summary.weight
+        if summary.box is not None:
+            boxes.setdefault(summary.label, []).append(BBox.from_tuple(summary.box))
+    for name, found in boxes.items():
+        infos[name].bbox = BBox.enclosing(found)
+    for info in infos.values():
+        info.holders = peer.holders(info.chunks[MISSIONS])
+    return [infos[name] for name in sorted(infos)]

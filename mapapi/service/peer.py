@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from mapapi.net.messages import ChunkSummary, Member
     from mapapi.net.security import Security
     from mapapi.net.shaping import Shaper
+    from mapapi.store.labels import Labels, LabelSummary
     from mapapi.swarm.commit_check import CommitRule
     from mapapi.swarm.liveness import LivenessOptions
     from mapapi.swarm.membership import MemberState
@@ -84,19 +85,30 @@ class Peer:
         self._tables = Tables(store)
 
     @classmethod
-    def open(cls, path: str | Path = ".", *, rules: Sequence[CommitRule] = ()) -> Peer:
-        """The peer of the repository at (or above) `path` (`rules`: see `Peer`)."""
-        return cls.of(Repository.find(path), rules=rules)
+    def open(
+        cls,
+        path: str | Path = ".",
+        *,
+        rules: Sequence[CommitRule] = (),
+        labels: Labels | None = None,
+    ) -> Peer:
+        """The peer of the repository at (or above) `path` (`rules`: see `Peer`;
+        `labels`: see `of`)."""
+        return cls.of(Repository.find(path), rules=rules, labels=labels)
 
     @classmethod
-    def of(cls, repo: Repository, *, rules: Sequence[CommitRule] = ()) -> Peer:
+    def of(
+        cls, repo: Repository, *, rules: Sequence[CommitRule] = (), labels: Labels | None = None
+    ) -> Peer:
         """The peer of `repo`: its store, identity, spatial index geometry and,
         for a secure repository, its keys and trust list (DESIGN §10); `rules`:
-        see `Peer`."""
+        see `Peer`. With `labels` (`mapapi.store.labels`), the store keeps
+        their index, from which `scan_labelled` and `label_summaries` answer;
+        `mapapi.app` gives the map tables' (rows by mission)."""
         config = repo.config
         security = repo.security()
         return cls(
-            repo.open_store(),
+            repo.open_store(labels),
             config.peer_id,
             name=config.name,
             grid=config.spatial,
@@ -338,6 +350,22 @@ class Peer:
         """Items visible at `time` in a table or chunk; a chunk not held here is
         fetched first (`mapapi.swarm.reading.scan`)."""
         return await reading.scan(self.store, self.swarm, time, table, chunk)
+
+    async def scan_labelled(
+        self, time: int, labels: Labels, label: str, table: str
+    ) -> list[Revision]:
+        """The items of `table` labelled `label` by `labels` visible at `time`, by
+        id: from the store's index when it keeps one of `labels` (only those rows
+        are read), else filtered from the table's rows (`mapapi.store.labels`)."""
+        return await reading.scan_labelled(self.store, self.swarm, labels, time, label, table)
+
+    def label_summaries(
+        self, labels: Labels, only: Sequence[str] | None = None
+    ) -> list[LabelSummary]:
+        """Per label of `labels` (or of those in `only`) and chunk, the live rows
+        held here now: how many, their weight and box. Kept by the store when
+        it indexes `labels`, else computed from every labelled row."""
+        return reading.label_summaries(self.store, labels, only)
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply a transaction (see `mapapi.swarm.commit`)."""

@@ -25,9 +25,11 @@ from mapapi.lookup.spatial import SpatialGrid
 from mapapi.service.recover import RecoveredIdentity, recover_identity
 from mapapi.service.repo_config import FIX_CONFIG, RepoConfig
 from mapapi.store.sqlite import SqliteStore
+from mapapi.store.sqlite_labelled import LabelledSqliteStore
 
 if TYPE_CHECKING:
     from mapapi.net.security import Security
+    from mapapi.store.labels import Labels
 
 REPO_DIR = ".mapapi"
 CONFIG = "config.toml"
@@ -254,8 +256,11 @@ class Repository:
         # ids were, or by `make_secure`) stays this peer's id; the others bind it.
         return Security.load(self.meta_dir, self.config.peer_id)
 
-    def open_store(self) -> SqliteStore:
-        """Open the repository's store."""
+    def open_store(self, labels: Labels | None = None) -> SqliteStore:
+        """Open the repository's store; with `labels`, one that keeps their
+        index (`mapapi.store.sqlite_labelled`)."""
+        if labels is not None:
+            return LabelledSqliteStore(self.store_path, labels)
         return SqliteStore(self.store_path)
 
     def is_empty(self) -> bool:

@@ -125,7 +125,7 @@ def check_schema(con: sqlite3.Connection, path: Path, schema: str, fmt: str, ver
             f"{path} was written in {what}; this mapapi reads formats up to {version}: "
             "upgrade mapapi (`pip install -U mapapi`), or clone the repository again"
         )
-    for table, columns in _tables(schema).items():
+    for table, columns in schema_tables(schema).items():
         have = [row[1] for row in con.execute(f"PRAGMA table_info({table})")]
         if have != columns:
             state = "is missing" if not have else f"has columns {have}, expected {columns}"
@@ -133,7 +133,7 @@ def check_schema(con: sqlite3.Connection, path: Path, schema: str, fmt: str, ver
 
 
 @functools.cache
-def _tables(schema: str) -> dict[str, list[str]]:
+def schema_tables(schema: str) -> dict[str, list[str]]:
     """Table name -> column names of the store `schema` creates (built in memory)."""
     con = sqlite3.connect(":memory:")
     try:

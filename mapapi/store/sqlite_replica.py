@@ -89,6 +89,7 @@ def install(
         )
     ]
     con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
+    con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lists them
     by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
     for revision in revisions:
         by_commit.setdefault(revision.commit_id, []).append(revision)
@@ -105,4 +106,5 @@ def install(
 def drop(con: sqlite3.Connection, chunk_id: ChunkId) -> None:
     """Forget a chunk's replica (this peer left it); commit records stay."""
     con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
+    con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lists them
     con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))

@@ -106,6 +106,7 @@ def write_commit(
         "UPDATE meta SET value = MAX(CAST(value AS INTEGER), ?) WHERE key = 'clock'",
         (record.time,),
     )
+    con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lacks these
     if new:
         con.execute("UPDATE meta SET value = CAST(value AS INTEGER) + 1 WHERE key = 'applied'")
     return new

@@ -2,18 +2,24 @@
 holders found by asking the members), and a read of a chunk waits while a
 writer holds its lock, so no commit at or before the read time can still
 arrive (DESIGN §5). Alone (no swarm), reads go straight to the store.
+
+Reads by label (a mission's rows, `mapapi.store.labels`) use the store's label
+index when it keeps one, and filter the table's rows otherwise.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from mapapi.core.errors import ChunkNotFound
+from mapapi.store.labels import LabelledStore, summarise
 
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
     from mapapi.core.ids import ChunkId, ItemId
     from mapapi.store.base import ReplicaStore
+    from mapapi.store.labels import LabelFn, Labels, LabelSummary
     from mapapi.swarm.node import Swarm
 
 
@@ -50,3 +56,50 @@ async def scan(
         for each in chunks:
             await swarm.locks.wait_readable(each)
     return store.scan(time, table=table, chunk=chunk)
+
+
+async def scan_labelled(
+    store: ReplicaStore, swarm: Swarm | None, labels: Labels, time: int, label: str, table: str
+) -> list[Revision]:
+    """The items of `table` labelled `label` visible at `time`: from the store's
+    label index when it keeps one for `labels`, else filtered from the table's
+    rows. In a swarm, a read of the label's chunks waits while a writer holds
+    them (as `scan`)."""
+    if not _indexed(store, labels):
+        fn = labels.of(store.tables().get(table, ""))
+        rows = await scan(store, swarm, time, table, None)
+        return [r for r in rows if fn is not None and _label(fn, r.data) == label]
+    assert isinstance(store, LabelledStore)
+    if swarm is not None:
+        for chunk in store.label_chunks(label, table):
+            await swarm.locks.wait_readable(chunk)
+    return store.scan_labelled(time, label, table=table)
+
+
+def label_summaries(
+    store: ReplicaStore, labels: Labels, only: Sequence[str] | None = None
+) -> list[LabelSummary]:
+    """Per label (of `only`, if given) and chunk, the live rows held now: kept
+    by the store when it indexes `labels`, else computed from every labelled row."""
+    if _indexed(store, labels):
+        assert isinstance(store, LabelledStore)
+        return store.label_summaries(only)
+    types = store.tables()
+    rows = [
+        r
+        for table, type_name in types.items()
+        if labels.of(type_name) is not None
+        for r in store.scan(store.clock(), table=table)
+    ]
+    found = summarise(rows, labels, types)
+    return found if only is None else [s for s in found if s.label in set(only)]
+
+
+def _indexed(store: ReplicaStore, labels: Labels) -> bool:
+    """Whether `store` keeps the index of `labels`."""
+    return isinstance(store, LabelledStore) and store.labels.signature == labels.signature
+
+
+def _label(fn: LabelFn, data: bytes) -> str | None:
+    row = fn(data)
+    return None if row is None else row.label

@@ -182,6 +182,7 @@ BENCHMARKS: dict[Command, tuple[str, ...]] = {
     ("bench", "spatial"): ("-d", "parking-garage", "-c", "1", "-l", "0", "-p", "2", "-n", "2"),
     ("bench", "registration"): ("--quick",),
     ("bench", "import"): ("-d", "intel", "-n", "1", "--store", "memory"),
+    ("bench", "scale"): ("--missions", "1,2", "--runs", "1"),
     ("bench", "triggers"): (
         *("-f", "0.5", "-m", "idle", "-w", "1", "-s", "1"),
         *("-p", "2", "--items", "5", "-n", "2"),
@@ -194,7 +195,7 @@ BENCHMARKS: dict[Command, tuple[str, ...]] = {
 }
 """The smallest run of each benchmark (and the demo), with its arguments."""
 
-_SCRATCH = {("bench", n) for n in ("local", "commit", "viewtest", "fuzz", "soak")}
+_SCRATCH = {("bench", n) for n in ("local", "commit", "viewtest", "fuzz", "soak", "scale")}
 
 
 def run_benchmark(out: Outputs, path: Command, root: Path) -> None:
