@@ -8,11 +8,14 @@ error at all (the probe of issue 18: 30 of 40 commits gone, nothing said).
 
 So the store counts the commit records it ever wrote (`meta` key "applied"; one
 that a fetched replica drops later still counts), and after every write
-transaction that added one, replaces `store.mark` beside `store.sqlite` (written
-to a temporary file, then renamed: a reader sees the old mark or the new one)
-with that count, the store's clock and the newest commit. A store behind its
-mark was rolled back: `mapctl fsck` says by how many commits, and so does the
-peer when it starts. The first write after a rollback records it in the store
+transaction that added one, rewrites `store.mark` beside `store.sqlite` with
+that count and the newest commit (its time and id): one line of fixed width
+written over the old one in place, with its own checksum, so a torn write is
+seen as no mark rather than a wrong one. (Writing a new file and renaming it
+over the old one costs 1.6 ms per commit on ext4, which flushes a file renamed
+over another; the write in place costs 4 µs.) A store behind its mark was
+rolled back: `mapctl fsck` says by how many commits, and so does the peer when
+it starts. The first write after a rollback records it in the store
 (`meta` key "rollbacks") before the mark moves on, so it stays known until
 `mapctl fsck --accept`.
 
@@ -29,10 +32,12 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import sqlite3
 import threading
 import time
-from dataclasses import asdict, dataclass
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,35 +51,62 @@ APPLIED, ROLLBACKS = "applied", "rollbacks"
 
 @dataclass(frozen=True, slots=True)
 class Mark:
-    """What the mark file says: commit records written, the clock, the newest commit."""
+    """What the mark file says: commit records written, the newest commit's time and id."""
 
     applied: int
-    clock: int
+    time: int
     commit: str
+
+
+_WIDTH = 160
+_LINE = re.compile(r"mapapi-mark applied=(\d+) time=(\d+) commit=([0-9a-f]*) crc=([0-9a-f]{8})")
+
+
+def encode(mark: Mark) -> bytes:
+    """The mark as one line of `_WIDTH` bytes, its checksum last."""
+    body = f"mapapi-mark applied={mark.applied} time={mark.time} commit={mark.commit}"
+    return f"{body} crc={zlib.crc32(body.encode()):08x}".ljust(_WIDTH - 1).encode() + b"\n"
+
+
+def decode(raw: bytes) -> Mark | None:
+    """The mark in `raw`, or None if it is no whole mark (a torn or foreign write)."""
+    found = _LINE.match(raw.decode("ascii", errors="replace"))
+    if found is None:
+        return None
+    applied, at, commit, crc = found.groups()
+    body = f"mapapi-mark applied={applied} time={at} commit={commit}"
+    if zlib.crc32(body.encode()) != int(crc, 16):
+        return None
+    return Mark(int(applied), int(at), commit)
 
 
 def read(path: Path) -> Mark | None:
     """The mark at `path`, or None if there is none (or it is unreadable: logged)."""
-    try:
-        raw = json.loads(path.read_text())
-        return Mark(int(raw["applied"]), int(raw["clock"]), str(raw["commit"]))
-    except FileNotFoundError:
-        return None
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        log.warning("the store's high-water mark %s cannot be read (%s); ignored", path, exc)
-        return None
+    for _ in range(3):  # a write in place may be under way: read again
+        try:
+            mark = decode(path.read_bytes())
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            log.warning("the store's high-water mark %s cannot be read (%s); ignored", path, exc)
+            return None
+        if mark is not None:
+            return mark
+    log.warning("the store's high-water mark %s is damaged; ignored until the next commit", path)
+    return None
 
 
 def write(path: Path, mark: Mark) -> None:
-    """Replace the mark at `path` atomically; a failure is logged, never raised (the
-    commit it follows is in the store already)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}")
+    """Write the mark at `path` over the old one; a failure is logged, never raised
+    (the commit it follows is in the store already)."""
     try:
-        tmp.write_text(json.dumps(asdict(mark)))
-        os.replace(tmp, path)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        try:
+            os.pwrite(fd, encode(mark), 0)
+        finally:
+            os.close(fd)
     except OSError as exc:
         log.warning("could not write the store's high-water mark %s: %s", path, exc)
-        tmp.unlink(missing_ok=True)
 
 
 def applied(con: sqlite3.Connection) -> int:
@@ -109,18 +141,18 @@ class HighWater:
             notes = [*self._notes(con), {**_as_json(found), "noticed": time.time()}]
             con.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (ROLLBACKS, json.dumps(notes)))
 
-    def wrote(self, commit: str) -> None:
-        """This thread's transaction added `commit`: mark it once it is committed."""
-        self._local.commit = commit
+    def wrote(self, commit: str, time: int) -> None:
+        """This thread's transaction added `commit` (at `time`): mark it once it is
+        committed."""
+        self._local.commit = (commit, time)
 
     def committed(self, con: sqlite3.Connection) -> None:
-        """After a write transaction: replace the mark if the transaction added a commit."""
-        commit = getattr(self._local, "commit", None)
-        if commit is None:
+        """After a write transaction: rewrite the mark if the transaction added a commit."""
+        newest = getattr(self._local, "commit", None)
+        if newest is None:
             return
         self._local.commit = None
-        clock = con.execute("SELECT value FROM meta WHERE key = 'clock'").fetchone()
-        write(self.path, Mark(applied(con), int(clock[0]), commit))
+        write(self.path, Mark(applied(con), newest[1], newest[0]))
 
     def rolled_back(self) -> None:
         """The transaction was undone: nothing to mark."""
@@ -146,8 +178,10 @@ class HighWater:
     def accept(self, con: sqlite3.Connection) -> None:
         """Inside a write transaction: forget the rollbacks and mark the store as it is."""
         con.execute("DELETE FROM meta WHERE key = ?", (ROLLBACKS,))
-        row = con.execute("SELECT id FROM commits ORDER BY time DESC, id DESC LIMIT 1").fetchone()
-        self.wrote("" if row is None else str(row[0]))
+        row = con.execute(
+            "SELECT id, time FROM commits ORDER BY time DESC, id DESC LIMIT 1"
+        ).fetchone()
+        self.wrote(*(("", 0) if row is None else (str(row[0]), int(row[1]))))
 
     @staticmethod
     def _notes(con: sqlite3.Connection) -> list[dict[str, Any]]:

@@ -192,9 +192,12 @@ class SqliteStore(SqliteChains):
         con = self._con()
         with self._write(con):
             self.mark.before_write(con)
-            fresh = chain_sql.unwritten(con, record, revisions)
-            if sqlite_rows.write_commit(con, record, revisions):
-                self.mark.wrote(record.id)
+            if sqlite_rows.write_record(con, record):
+                self.mark.wrote(record.id, record.time)
+                fresh = {r.chunk_id for r in revisions}  # none of it was here
+            else:
+                fresh = chain_sql.unwritten(con, record, revisions)
+            sqlite_rows.write_revisions(con, record, revisions)
             chain_sql.extend(con, record, revisions, fresh)
 
     def _revision(self, row: sqlite3.Row | tuple) -> Revision:
@@ -322,7 +325,8 @@ class SqliteStore(SqliteChains):
             chain_sql.rebuild(con, self.path, chunk_id)
             chain_sql.forget(con, chunk_id)
             if commits:
-                self.mark.wrote(max(commits, key=lambda c: (c.time, c.id)).id)
+                newest = max(commits, key=lambda c: (c.time, c.id))
+                self.mark.wrote(newest.id, newest.time)
 
     def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
         """The persisted state of the chunk's Raft group, or None."""

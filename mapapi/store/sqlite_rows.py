@@ -65,22 +65,43 @@ def write_commit(
     con: sqlite3.Connection, record: CommitRecord, revisions: Sequence[Revision]
 ) -> bool:
     """Write the record and its revisions (inside the caller's write transaction);
-    whether the record is new here (then the store's count of the commit records
-    it wrote, `meta` "applied", grows by one: see `store/mark.py`)."""
+    whether the record is new here (`write_record`)."""
+    new = write_record(con, record)
+    write_revisions(con, record, revisions)
+    return new
+
+
+def write_record(con: sqlite3.Connection, record: CommitRecord) -> bool:
+    """Write a commit's record unless it is here; whether it was not (then the
+    store's count of the commit records it wrote, `meta` "applied", grows by one:
+    see `store/mark.py`). A record is written with the commit's first revisions,
+    so when it is new, none of its revisions is here yet."""
     # Idempotent and additive: a commit that spans chunks reaches a holder
     # as one batch per chunk, each applied on its own.
-    new = con.execute(
-        f"INSERT OR IGNORE INTO commits ({COMMIT_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
-        (
-            record.id,
-            record.time,
-            record.author,
-            record.message,
-            ",".join(record.chunks),
-            record.author_name,
-            record.view,
-        ),
-    ).rowcount == 1
+    new = (
+        con.execute(
+            f"INSERT OR IGNORE INTO commits ({COMMIT_COLUMNS}) VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (
+                record.id,
+                record.time,
+                record.author,
+                record.message,
+                ",".join(record.chunks),
+                record.author_name,
+                record.view,
+            ),
+        ).rowcount
+        == 1
+    )
+    if new:
+        con.execute("UPDATE meta SET value = CAST(value AS INTEGER) + 1 WHERE key = 'applied'")
+    return new
+
+
+def write_revisions(
+    con: sqlite3.Connection, record: CommitRecord, revisions: Sequence[Revision]
+) -> None:
+    """Write a commit's revisions (those here already stay) and advance the clock."""
     # In primary-key order: random ids inserted as they come touch pages all
     # over the table's B-tree; sorted, a large commit writes in half the time.
     con.executemany(
@@ -107,9 +128,6 @@ def write_commit(
         (record.time,),
     )
     con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lacks these
-    if new:
-        con.execute("UPDATE meta SET value = CAST(value AS INTEGER) + 1 WHERE key = 'applied'")
-    return new
 
 
 def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:

@@ -11,6 +11,7 @@ import json
 import shutil
 import sqlite3
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -19,7 +20,7 @@ from google.protobuf.struct_pb2 import Struct
 from mapapi import Peer, Repository
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store import SqliteStore
+from mapapi.store import SqliteStore, mark
 from mapapi.testing import wait_until
 from tests.cli.conftest import STRUCT, Mapctl
 from tests.multiproc.conftest import Daemons, mapctl, mapctl_json, run_mapctl
@@ -112,9 +113,10 @@ def test_a_peer_that_starts_behind_its_mark_says_so(
     points: Mapctl, caplog: pytest.LogCaptureFixture
 ) -> None:
     commit_points(points, 2)
-    mark = points.repo / ".mapapi" / "store.mark"
-    kept = json.loads(mark.read_text())
-    mark.write_text(json.dumps({**kept, "applied": kept["applied"] + 4}))  # as after a rollback
+    path = points.repo / ".mapapi" / "store.mark"
+    kept = mark.read(path)
+    assert kept is not None
+    mark.write(path, replace(kept, applied=kept.applied + 4))  # as after a rollback
 
     async def start() -> None:
         peer = Peer.open(points.repo)

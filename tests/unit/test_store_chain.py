@@ -17,7 +17,7 @@ from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import MemoryStore, SqliteStore
 from mapapi.store.base import Divergence, ReplicaStore
-from mapapi.store.mark import read
+from mapapi.store.mark import Mark, decode, encode, read
 from mapapi.swarm.chain_check import check_chain
 
 AUTHOR = PeerId.new()
@@ -135,6 +135,13 @@ def test_an_older_store_gets_its_chains_once_when_opened(tmp_path: Path) -> None
     again.close()
 
 
+def test_a_torn_mark_is_no_mark() -> None:
+    whole = encode(Mark(12, 40, "ab" * 16))
+    assert decode(whole) == Mark(12, 40, "ab" * 16)
+    assert decode(whole.replace(b"applied=12", b"applied=13")) is None  # half written
+    assert decode(b"") is None
+
+
 def test_the_mark_follows_every_commit(tmp_path: Path) -> None:
     made = sqlite_store(tmp_path / "s.sqlite")
     record = None
@@ -144,7 +151,7 @@ def test_the_mark_follows_every_commit(tmp_path: Path) -> None:
     mark = read(tmp_path / "s.mark")
     assert mark is not None
     assert record is not None
-    assert (mark.applied, mark.clock, mark.commit) == (2, 2, record.id)
+    assert (mark.applied, mark.time, mark.commit) == (2, 2, record.id)
     assert made.rollbacks() == []
     made.close()
 
