@@ -40,6 +40,7 @@ _REPLIES: dict[type, type] = {
     messages.ChordGet: messages.ChordValues,
     messages.CommitStatusQuery: messages.CommitStatus,
     messages.EvictRequest: messages.EvictGrant,
+    messages.ChainHead: messages.ChainHead,  # a holder's link, answered with ours
 }
 """The reply of each request that is not answered with `Ack` (or an ErrorReply)."""
 
