@@ -16,6 +16,7 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
+from mapapi.core.chunk_state import ChunkState, TxState
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
@@ -225,6 +226,39 @@ def decode_entry(data: bytes) -> LogEntry:
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"an entry in a chunk's log does not parse: {exc}") from exc
+
+
+def encode_chunk_state(state: ChunkState) -> bytes:
+    """Serialize a chunk's whole state (a Raft snapshot's data)."""
+    m = core_pb2.ChunkSnapshot(table=state.table, type_name=state.type_name, time=state.time)
+    m.revisions.extend(revision_to_pb(r) for r in state.revisions)
+    m.commits.extend(commit_record_to_pb(c) for c in state.commits)
+    for tx in state.txs:
+        m.txs.add(commit_id=tx.commit_id.to_bytes(), state=tx.state, time=tx.time, data=tx.data)
+    return bytes(m.SerializeToString())
+
+
+def decode_chunk_state(data: bytes) -> ChunkState:
+    """The state `encode_chunk_state` wrote.
+
+    Raises:
+        CorruptRepoError: it does not parse (a damaged snapshot).
+    """
+    m = core_pb2.ChunkSnapshot()
+    try:
+        m.ParseFromString(data)
+        return ChunkState(
+            m.table,
+            m.type_name,
+            m.time,
+            tuple(revision_from_pb(r) for r in m.revisions),
+            tuple(commit_record_from_pb(c) for c in m.commits),
+            tuple(
+                TxState(CommitId.from_bytes(t.commit_id), t.state, t.time, t.data) for t in m.txs
+            ),
+        )
+    except (DecodeError, ValueError) as exc:
+        raise CorruptRepoError(f"a chunk's snapshot does not parse: {exc}") from exc
 
 
 # The read set and scanned scopes, stored alike in a view and in a proposal.

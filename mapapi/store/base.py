@@ -289,6 +289,9 @@ class ReplicaStore(Store, Protocol):
     def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
         """The transactions prepared on the chunk and not decided there yet."""
 
+    def raft_txs(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """Every transaction the chunk's log recorded, prepared or decided."""
+
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""
 

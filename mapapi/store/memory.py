@@ -348,12 +348,12 @@ class MemoryStore(MemoryChains):
 
     def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
         """The transactions prepared on the chunk and not decided there yet."""
+        return [(c, row) for c, row in self.raft_txs(chunk_id) if row.state == "prepared"]
+
+    def raft_txs(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """Every transaction the chunk's log recorded, prepared or decided."""
         with self._lock:
-            return sorted(
-                (c, row)
-                for (chunk, c), row in self._tx.items()
-                if chunk == chunk_id and row.state == "prepared"
-            )
+            return sorted((c, row) for (chunk, c), row in self._tx.items() if chunk == chunk_id)
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -168,14 +168,14 @@ def tx_put(con: sqlite3.Connection, chunk: str, commit_id: str, row: TxRow) -> N
     )
 
 
-def tx_prepared(con: sqlite3.Connection, chunk: str) -> list[tuple[str, TxRow]]:
-    """The transactions prepared on `chunk` and not yet decided there."""
+def tx_rows(con: sqlite3.Connection, chunk: str, prepared: bool) -> list[tuple[str, TxRow]]:
+    """The transactions `chunk`'s log recorded (only those not decided yet, if `prepared`)."""
     return [
         (commit_id, TxRow(state, int(time), bytes(data)))
         for commit_id, state, time, data in con.execute(
             "SELECT commit_id, state, time, data FROM raft_tx "
-            "WHERE chunk_id = ? AND state = 'prepared' ORDER BY commit_id",
-            (chunk,),
+            "WHERE chunk_id = ? AND (state = 'prepared' OR NOT ?) ORDER BY commit_id",
+            (chunk, prepared),
         )
     ]
 

@@ -372,7 +372,11 @@ class SqliteStore(SqliteChains):
 
     def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
         """The transactions prepared on the chunk and not decided there yet."""
-        return [(CommitId(c), row) for c, row in raft_sql.tx_prepared(self._con(), chunk_id)]
+        return [(CommitId(c), r) for c, r in raft_sql.tx_rows(self._con(), chunk_id, True)]
+
+    def raft_txs(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
+        """Every transaction the chunk's log recorded, prepared or decided."""
+        return [(CommitId(c), r) for c, r in raft_sql.tx_rows(self._con(), chunk_id, False)]
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""

@@ -117,6 +117,20 @@ def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:
     )
 
 
+def compact(store: ReplicaStore, group: GroupState, data: bytes) -> None:
+    """Compact the group's log up to its applied index into a snapshot of `data` (the
+    chunk's state there), persisted with the entries after it."""
+    node = group.node
+    snap = node.compact(node.log.applied, data)
+    kept = store.raft_load(group.chunk)
+    after = [] if kept is None else [e for e in kept.entries if e.index > snap.index]
+    store.raft_save(
+        group.chunk,
+        snapshot=(snap.index, snap.term, snap.config.encode(), snap.data),
+        entries=after,
+    )
+
+
 def apply_committed(
     store: ReplicaStore, group: GroupState, entries: tuple[Entry, ...], apply: ApplyFn
 ) -> None:

@@ -6,14 +6,14 @@ sending its messages, applies committed entries through the `apply` hook in the
 same store transaction that records the applied index (so an entry's effect
 lands once, even across a crash), and resolves the futures of proposals once
 their entry applies. One ticker drives every group; all messages for one peer
-leave in one `RaftBatch` notification per round, so the heartbeats of many
-shared groups cost one frame per pair of peers.
+leave in one `RaftBatch` notification per round (`swarm/raft_mail.py`), so the
+heartbeats of many shared groups cost one frame per pair of peers. With a
+`StoreStates`, logs are compacted into snapshots of the chunk's state, which a
+member that joins or lags far behind installs (`swarm/chunk_state.py`).
 
 Node ids: the core numbers nodes with positive ints; a peer's node id is the top
 63 bits of its 128-bit `PeerId` (`node_id`), the same in every group and on
-every peer, so configurations in the logs name peers, never addresses. The
-address to send to comes from the member list at send time, so a peer that
-restarts on another port is reached as soon as the swarm knows its new address.
+every peer, so configurations in the logs name peers, never addresses.
 """
 
 from __future__ import annotations
@@ -24,11 +24,12 @@ import random
 from collections.abc import Callable, Iterable
 from functools import partial
 
-from mapapi.core.errors import MapError, PeerUnavailable, RequestTimeout
+from mapapi.core.errors import PeerUnavailable, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
-from mapapi.net.messages import RaftBatch, RaftMessage
+from mapapi.net.messages import RaftBatch
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.group_state import (
     AddressFn,
     Applied,
@@ -36,9 +37,11 @@ from mapapi.swarm.group_state import (
     GroupState,
     NotChunkLeader,
     apply_committed,
+    compact,
     persist,
 )
 from mapapi.swarm.raft import RaftNode
+from mapapi.swarm.raft_mail import RaftMail
 from mapapi.swarm.raft_types import (
     NONE,
     Config,
@@ -48,7 +51,7 @@ from mapapi.swarm.raft_types import (
     RaftOptions,
     Role,
 )
-from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of, to_wire
+from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of
 from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
@@ -58,6 +61,8 @@ TICK_SECONDS = 0.05
 leader is replaced in 0.5-1 s, and heartbeats leave every 50 ms."""
 PROPOSE_TIMEOUT = 5.0
 """Seconds a proposal waits to be committed and applied."""
+COMPACT_AFTER = 1000
+"""Entries a group applies past its last snapshot before its log is compacted."""
 
 
 class RaftGroups:
@@ -73,6 +78,10 @@ class RaftGroups:
         options: the core's tunables; `seed` makes election timeouts reproducible.
         on_change: called after every round of the Ready loop that changed a
             group's role or leader, or sent messages (so waiters re-check).
+        states: takes and installs chunks' states as snapshots
+            (`swarm/chunk_state.py`); without it logs are never compacted and a
+            snapshot cannot be installed.
+        compact_after: entries applied past the last snapshot before compacting.
     """
 
     def __init__(
@@ -86,22 +95,21 @@ class RaftGroups:
         options: RaftOptions | None = None,
         seed: int | None = None,
         on_change: Callable[[], None] | None = None,
+        states: StoreStates | None = None,
+        compact_after: int = COMPACT_AFTER,
     ) -> None:
         self.me = me
+        self.states = states
+        self.compact_after = compact_after
         self.store = store
         self.rpc = rpc
-        self._address = address
+        self.mail = RaftMail(rpc, address, peers)
         self._apply = apply
-        self._peers = peers
         self._options = options or RaftOptions()
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
         self._groups: dict[ChunkId, GroupState] = {}
-        self._outbox: dict[int, list[RaftMessage]] = {}
-        self._by_node: dict[int, PeerId] = {}
         self._reads = 0  # ReadIndex contexts issued
-        self.frames_sent = 0  # RaftBatch notifications ...
-        self.messages_sent = 0  # ... and the Raft messages they carried
         self._ticker: asyncio.Task[None] | None = None
         rpc.register(RaftBatch, self.rpc_raft_batch)
 
@@ -133,7 +141,14 @@ class RaftGroups:
         self.store.raft_save(
             chunk, hard=(1, NONE, 1), entries=rows(PersistentState.bootstrap(config).entries)
         )
-        self.store.raft_applied(chunk, 1)
+        # The chunk's clock starts at its newest commit (a history from before the group).
+        self.store.raft_applied(
+            chunk, 1, max((c.time for c in self.store.chunk_commits(chunk)), default=0)
+        )
+        if self.states is not None and self.states.holds(chunk):
+            # A chunk with a history from before its group: the log starts from a
+            # snapshot of it, which every member that joins receives.
+            compact(self.store, self._groups[chunk], self.states.take(chunk))
         if config.voters == {node_id(self.me)}:
             self._groups[chunk].node.campaign()
             self._process(self._groups[chunk])
@@ -351,7 +366,9 @@ class RaftGroups:
             rd = group.node.ready()
             persist(self.store, group.chunk, rd)
             for message in rd.messages:
-                self._outbox.setdefault(message.to, []).append(to_wire(group.chunk, message))
+                self.mail.post(group.chunk, message)
+            if rd.snapshot is not None:
+                self._install(group, rd.snapshot.data, rd.snapshot.index)
             apply_committed(self.store, group, rd.committed_entries, self._apply)
             for read in rd.read_states:
                 waiting = group.reads.get(read.context)
@@ -362,28 +379,22 @@ class RaftGroups:
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
                 self._on_change()
             group.node.advance(rd)
+            done = group.node.log.applied - group.node.log.snapshot.index
+            if self.states is not None and done >= self.compact_after:
+                compact(self.store, group, self.states.take(group.chunk))
+
+    def _install(self, group: GroupState, data: bytes, index: int) -> None:
+        """Make this replica a leader's snapshot of the chunk (the log jumped past us)."""
+        if self.states is None:
+            log.error("chunk %s: a snapshot arrived, and this peer cannot install one", group.chunk)
+            return
+        self.states.install(group.chunk, data, index)
+        group.progress.set()
 
     def _flush(self) -> None:
-        """Send each peer its messages of every group, as one notification."""
-        outbox, self._outbox = self._outbox, {}
-        if outbox:
+        """Send what every group queued (waiters re-check if anything left)."""
+        if self.mail.flush():
             self._on_change()
-        for to, messages in outbox.items():
-            peer = self._peer(to)
-            if peer is None:
-                log.debug("no known peer for node %d; %d message(s) dropped", to, len(messages))
-                continue
-            try:
-                self.rpc.notify(self._address(peer), RaftBatch(tuple(messages)))
-                self.frames_sent += 1
-                self.messages_sent += len(messages)
-            except MapError as exc:  # Raft retries by itself: a lost message is a late one
-                log.debug("raft messages to %s not sent: %s", peer.short, exc)
 
     def _peer(self, node: int) -> PeerId | None:
-        """The peer a node id stands for (the member list, looked up again on a miss)."""
-        if node == NONE:
-            return None
-        if node not in self._by_node:
-            self._by_node = {node_id(p): p for p in self._peers()}
-        return self._by_node.get(node)
+        return self.mail.peer(node)

@@ -21,7 +21,8 @@ from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply_tx import applier
-from mapapi.swarm.groups import Applied, RaftGroups
+from mapapi.swarm.chunk_state import StoreStates
+from mapapi.swarm.groups import COMPACT_AFTER, Applied, RaftGroups
 from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
 
@@ -47,7 +48,13 @@ class Node:
             peers=lambda: world.addresses.keys(),
             seed=int(peer.to_bytes()[0]),
             on_change=self.changed.set,
+            states=self.states(),
+            compact_after=world.compact_after,
         )
+
+    def states(self) -> StoreStates | None:
+        """Nothing to snapshot: this node's "state" is the list of entries it applied."""
+        return None
 
     def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
         self.applied.setdefault(chunk, []).append(entry.data)
@@ -79,6 +86,7 @@ class World:
         self.root = root
         self.addresses: dict[PeerId, str] = {}
         self.nodes: list[Node] = []
+        self.compact_after = COMPACT_AFTER  # for the nodes added from now on
 
     async def add(self, peer: PeerId | None = None, kind: type[Node] | None = None) -> Node:
         peer = peer or PeerId.new()
@@ -117,6 +125,10 @@ async def founded(world: World, chunks: list[ChunkId], n: int = 3) -> list[Node]
 
 class Ledger(Node):
     """A peer whose groups decide commit proposals (`swarm/apply.py`)."""
+
+    def states(self) -> StoreStates | None:
+        """The chunks' states in the store, as snapshots carry them."""
+        return StoreStates(self.store)
 
     def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
         applied = applier(self.store)(chunk, entry)

@@ -105,12 +105,12 @@ async def test_many_groups_share_one_frame_per_pair_of_peers(world: World) -> No
     for chunk in chunks:
         await leader_of(nodes, chunk)
     for node in nodes:
-        node.groups.frames_sent = node.groups.messages_sent = 0
-    await nodes[0].wait(lambda: nodes[0].groups.frames_sent >= 20)  # heartbeats flow
+        node.groups.mail.frames_sent = node.groups.mail.messages_sent = 0
+    await nodes[0].wait(lambda: nodes[0].groups.mail.frames_sent >= 20)  # heartbeats flow
     # Every node leads some of the 20 groups and follows the rest: each frame carries
     # the heartbeats (or their answers) of several groups, not one frame per group.
     for node in nodes:
-        assert node.groups.messages_sent >= 3 * node.groups.frames_sent
+        assert node.groups.mail.messages_sent >= 3 * node.groups.mail.frames_sent
 
 
 # -- commits through the log: paper Algorithm 1 on one chunk's group -------------------

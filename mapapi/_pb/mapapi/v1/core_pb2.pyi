@@ -167,6 +167,34 @@ class ChunkLogEntry(_message.Message):
     decision: TxDecision
     def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ...) -> None: ...
 
+class ChunkSnapshot(_message.Message):
+    __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs")
+    TABLE_FIELD_NUMBER: _ClassVar[int]
+    TYPE_NAME_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    REVISIONS_FIELD_NUMBER: _ClassVar[int]
+    COMMITS_FIELD_NUMBER: _ClassVar[int]
+    TXS_FIELD_NUMBER: _ClassVar[int]
+    table: str
+    type_name: str
+    time: int
+    revisions: _containers.RepeatedCompositeFieldContainer[Revision]
+    commits: _containers.RepeatedCompositeFieldContainer[CommitRecord]
+    txs: _containers.RepeatedCompositeFieldContainer[TxState]
+    def __init__(self, table: _Optional[str] = ..., type_name: _Optional[str] = ..., time: _Optional[int] = ..., revisions: _Optional[_Iterable[_Union[Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[CommitRecord, _Mapping]]] = ..., txs: _Optional[_Iterable[_Union[TxState, _Mapping]]] = ...) -> None: ...
+
+class TxState(_message.Message):
+    __slots__ = ("commit_id", "state", "time", "data")
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    STATE_FIELD_NUMBER: _ClassVar[int]
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    DATA_FIELD_NUMBER: _ClassVar[int]
+    commit_id: bytes
+    state: str
+    time: int
+    data: bytes
+    def __init__(self, commit_id: _Optional[bytes] = ..., state: _Optional[str] = ..., time: _Optional[int] = ..., data: _Optional[bytes] = ...) -> None: ...
+
 class ItemSince(_message.Message):
     __slots__ = ("item_id", "time")
     ITEM_ID_FIELD_NUMBER: _ClassVar[int]
