@@ -20,7 +20,7 @@ from mapapi.core.chunk_state import ChunkState, TxState
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.proposal import LogEntry, Proposal, TxDecision
+from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
 from mapapi.core.transaction import Change, Conflict, Isolation, Op
 from mapapi.core.view import Scope, View
 
@@ -170,12 +170,15 @@ def decode_view(blob: bytes) -> View:
 
 def encode_entry(entry: LogEntry) -> bytes:
     """Serialize what a chunk's Raft log entry carries: a proposal (a prepare when
-    it names participants) or a transaction's decision."""
+    it names participants), a transaction's decision or a readers' floor."""
     if isinstance(entry, TxDecision):
         decision = core_pb2.TxDecision(
             commit_id=entry.commit_id.to_bytes(), commit=entry.commit, time=entry.time
         )
         return bytes(core_pb2.ChunkLogEntry(decision=decision).SerializeToString())
+    if isinstance(entry, TimeFloor):
+        floor = core_pb2.TimeFloor(time=entry.time)
+        return bytes(core_pb2.ChunkLogEntry(floor=floor).SerializeToString())
     m = core_pb2.CommitProposal(
         commit_id=entry.commit_id.to_bytes(),
         time=entry.time,
@@ -206,8 +209,10 @@ def decode_entry(data: bytes) -> LogEntry:
         if entry.WhichOneof("body") == "decision":
             d = entry.decision
             return TxDecision(CommitId.from_bytes(d.commit_id), d.commit, d.time)
+        if entry.WhichOneof("body") == "floor":
+            return TimeFloor(entry.floor.time)
         if entry.WhichOneof("body") != "proposal":
-            raise ValueError("the entry carries neither a proposal nor a decision")
+            raise ValueError("the entry carries no proposal, decision or floor")
         m = entry.proposal
         return Proposal(
             CommitId.from_bytes(m.commit_id),

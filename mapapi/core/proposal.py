@@ -93,5 +93,15 @@ class TxDecision:
     time: int = 0
 
 
-LogEntry = Proposal | TxDecision
+@dataclass(frozen=True, slots=True)
+class TimeFloor:
+    """A reader closes a chunk's log up to `time`: applying it moves the chunk's clock
+    there, so every commit applied after it is stamped later (`swarm/apply.py`), and a
+    view reading the chunk at `time` once the floor applied reads a state that never
+    changes."""
+
+    time: int
+
+
+LogEntry = Proposal | TxDecision | TimeFloor
 """What a chunk's log entry carries."""

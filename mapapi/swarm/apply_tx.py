@@ -27,7 +27,7 @@ from dataclasses import replace
 from mapapi.core import codec
 from mapapi.core.history import CommitRecord
 from mapapi.core.ids import ChunkId, CommitId
-from mapapi.core.proposal import Proposal, TxDecision
+from mapapi.core.proposal import Proposal, TimeFloor, TxDecision
 from mapapi.core.validate import build_revisions
 from mapapi.store.base import ReplicaStore, TxRow
 from mapapi.swarm.apply import Outcome, apply_proposal, decide, write_commit
@@ -41,10 +41,16 @@ PREPARED, COMMITTED, ABORTED = "prepared", "committed", "aborted"
 def applier(store: ReplicaStore, rules: Sequence[CommitRule] = ()) -> ApplyFn:
     """The `RaftGroups` apply hook of a peer: each committed entry is a proposal
     (`apply_proposal`), a prepare or a decision (below), decided and written on
-    this replica; its `Outcome` goes to the proposer."""
+    this replica, or a readers' floor that moves the chunk's clock; its `Outcome`
+    goes to the proposer."""
 
     def apply_entry(chunk: ChunkId, entry: Entry) -> Applied:
         carried = codec.decode_entry(entry.data)
+        if isinstance(carried, TimeFloor):
+            # A prepared transaction's decision must stay past the chunk's clock: wait.
+            if store.raft_tx_prepared(chunk):
+                return Applied(Outcome(busy=True))
+            return Applied(Outcome(), carried.time)
         if isinstance(carried, TxDecision):
             outcome = apply_decision(store, chunk, carried)
         elif carried.is_prepare:

@@ -24,7 +24,7 @@ from mapapi.core.clock import LamportClock
 from mapapi.core.errors import CommitUncertain, ConflictError, MapError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
-from mapapi.core.proposal import LogEntry, Proposal, TxDecision
+from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
 from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
@@ -165,7 +165,7 @@ class LogCommits:
         pause = RETRY_PAUSE
         while True:
             try:
-                outcome = await self._propose_once(chunk, entry.commit_id, data)
+                outcome = await self._propose_once(chunk, entry, data)
                 if not outcome.busy:
                     return outcome
                 error: MapError = ChunkBusy(
@@ -179,7 +179,37 @@ class LogCommits:
             await asyncio.sleep(pause * (0.5 + random.random()))
             pause = min(pause * 2, MAX_RETRY_PAUSE)
 
-    async def _propose_once(self, chunk: ChunkId, commit_id: CommitId, data: bytes) -> Outcome:
+    async def read_at(self, chunk: ChunkId, time: int, timeout: float = PROPOSE_TIMEOUT) -> None:  # noqa: ASYNC109
+        """Make this replica of `chunk` read at `time` as every replica will from now
+        on: catch up with the leader (ReadIndex), and if the chunk's clock is still
+        behind `time`, close its log there with a `TimeFloor`, so every commit
+        applied later is stamped past `time` and a view reading at `time` sees a
+        state that never changes, and every change after it as a conflict.
+
+        Raises:
+            NotChunkLeader: no leader was known in time.
+            ChunkBusy: a multi-chunk transaction held the chunk too long.
+            RequestTimeout: the leader could not confirm in time.
+        """
+        await self._caught_up(chunk, timeout)
+        if self.groups.store.raft_time(chunk) >= time:
+            return
+        await self.propose(chunk, TimeFloor(time), timeout)
+        await self._caught_up(chunk, timeout)  # the floor applied here too
+
+    async def _caught_up(self, chunk: ChunkId, timeout: float) -> None:  # noqa: ASYNC109
+        """`RaftGroups.catch_up`, asking again while an election runs."""
+        deadline = asyncio.get_running_loop().time() + timeout
+        while True:
+            try:
+                await self.groups.catch_up(chunk, timeout)
+                return
+            except NotChunkLeader:
+                if asyncio.get_running_loop().time() + MAX_RETRY_PAUSE > deadline:
+                    raise
+                await asyncio.sleep(MAX_RETRY_PAUSE * random.random())
+
+    async def _propose_once(self, chunk: ChunkId, entry: LogEntry, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):
             outcome = (await self.groups.propose(chunk, data)).result
             assert isinstance(outcome, Outcome)  # the groups apply with `apply_tx.applier`
@@ -193,7 +223,9 @@ class LogCommits:
             return Outcome(conflicts=tuple(exc.conflicts))
         except UsageError as exc:
             return Outcome(refusal=str(exc))
-        decision = TxDecision(commit_id, answer.commit, answer.time) if answer.decided else None
+        decision = None
+        if answer.decided and not isinstance(entry, TimeFloor):
+            decision = TxDecision(entry.commit_id, answer.commit, answer.time)
         return Outcome(
             answer.record,
             answer.revisions,

@@ -10,7 +10,7 @@ import pytest
 
 from mapapi.core import codec
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.proposal import LogEntry, Proposal, TxDecision
+from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
 from mapapi.core.transaction import Change, Op
 from mapapi.store.base import ReplicaStore
 from mapapi.store.memory import MemoryStore
@@ -159,3 +159,22 @@ def test_both_chunks_commit_at_one_time(store: ReplicaStore) -> None:
     assert record is not None
     assert record.time == t
     assert {r.item_id: r.update_time for r in store.commit_revisions(record.id)} == {X: t, Y: t}
+
+
+def test_a_floor_moves_the_clock_so_later_commits_are_stamped_past_it(
+    store: ReplicaStore,
+) -> None:
+    log = Log(store)
+    log(A, TimeFloor(50))
+    assert store.raft_time(A) == 50
+    later = log(A, single(write(X, A, b"x"), 0, 3))  # a writer whose clock is far behind
+    assert later.record is not None
+    assert later.record.time == 51
+
+
+def test_a_floor_waits_while_a_transaction_is_prepared(store: ReplicaStore) -> None:
+    log = Log(store)
+    p = prepares(begin=0, time=1)
+    log(A, p[A])
+    assert log(A, TimeFloor(50)).busy
+    assert store.raft_time(A) == 0  # the decision's time stays past the clock

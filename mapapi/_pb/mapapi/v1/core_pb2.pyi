@@ -159,13 +159,21 @@ class TxDecision(_message.Message):
     time: int
     def __init__(self, commit_id: _Optional[bytes] = ..., commit: _Optional[bool] = ..., time: _Optional[int] = ...) -> None: ...
 
+class TimeFloor(_message.Message):
+    __slots__ = ("time",)
+    TIME_FIELD_NUMBER: _ClassVar[int]
+    time: int
+    def __init__(self, time: _Optional[int] = ...) -> None: ...
+
 class ChunkLogEntry(_message.Message):
-    __slots__ = ("proposal", "decision")
+    __slots__ = ("proposal", "decision", "floor")
     PROPOSAL_FIELD_NUMBER: _ClassVar[int]
     DECISION_FIELD_NUMBER: _ClassVar[int]
+    FLOOR_FIELD_NUMBER: _ClassVar[int]
     proposal: CommitProposal
     decision: TxDecision
-    def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ...) -> None: ...
+    floor: TimeFloor
+    def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ..., floor: _Optional[_Union[TimeFloor, _Mapping]] = ...) -> None: ...
 
 class ChunkSnapshot(_message.Message):
     __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs")
