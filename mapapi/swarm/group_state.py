@@ -7,15 +7,19 @@ what its proposers and readers wait for, and how a `Ready` is persisted.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from mapapi.core.errors import MapError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_types import NONE, Entry, EntryKind, Ready, Role
 from mapapi.swarm.raft_wire import rows
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +81,7 @@ class GroupState:
     leader: int = NONE
     progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
     reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
+    members: frozenset[int] = frozenset()  # the configuration last reported (`on_members`)
 
     def settle(self, entries: tuple[Entry, ...], results: dict[int, Applied]) -> None:
         """Answer the proposals of these applied entries: with what applying did,
@@ -129,6 +134,15 @@ def compact(store: ReplicaStore, group: GroupState, data: bytes) -> None:
         snapshot=(snap.index, snap.term, snap.config.encode(), snap.data),
         entries=after,
     )
+
+
+def install(states: StoreStates | None, group: GroupState, data: bytes, index: int) -> None:
+    """Make this replica a leader's snapshot of the chunk (the log jumped past us)."""
+    if states is None:
+        log.error("chunk %s: a snapshot arrived, and this peer cannot install one", group.chunk)
+        return
+    states.install(group.chunk, data, index)
+    group.progress.set()
 
 
 def apply_committed(

@@ -38,21 +38,21 @@ from mapapi.swarm.group_state import (
     NotChunkLeader,
     apply_committed,
     compact,
+    install,
     persist,
 )
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_mail import RaftMail
 from mapapi.swarm.raft_types import (
     NONE,
+    ConfChange,
     Config,
     NotLeader,
     PersistentState,
-    ProposalRefused,
     RaftOptions,
     Role,
 )
 from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of
-from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +82,8 @@ class RaftGroups:
             (`swarm/chunk_state.py`); without it logs are never compacted and a
             snapshot cannot be installed.
         compact_after: entries applied past the last snapshot before compacting.
+        on_members: called with a group's members (the peers it can name) each
+            time a configuration change takes effect here.
     """
 
     def __init__(
@@ -97,10 +99,12 @@ class RaftGroups:
         on_change: Callable[[], None] | None = None,
         states: StoreStates | None = None,
         compact_after: int = COMPACT_AFTER,
+        on_members: Callable[[ChunkId, list[PeerId]], None] | None = None,
     ) -> None:
         self.me = me
         self.states = states
         self.compact_after = compact_after
+        self._on_members = on_members
         self.store = store
         self.rpc = rpc
         self.mail = RaftMail(rpc, address, peers)
@@ -224,41 +228,42 @@ class RaftGroups:
         group = self._group(chunk)
         return await self._await_entry(group, lambda: group.node.propose(data), timeout)
 
-    async def change_members(
+    def config(self, chunk: ChunkId) -> Config:
+        """The chunk's group configuration as this peer holds it now."""
+        return self._group(chunk).node.config
+
+    async def propose_change(
         self,
         chunk: ChunkId,
-        holders: Iterable[PeerId],
-        factor: int = DEFAULT_REPLICATION,
+        change: ConfChange,
         timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
-    ) -> Config:
-        """As the chunk's leader, make `holders` the group's members, one
-        single-server change at a time, with the voters `voters.next_change`
-        picks (an odd number, at most `factor`); returns the configuration then.
-        A new holder must have called `join` to take in the log.
+    ) -> Applied:
+        """Append one single-server membership change (this peer must lead) and
+        wait until it applies here (`swarm/group_members.py` drives them).
 
         Raises:
-            NotChunkLeader: this peer does not lead the chunk (or stopped leading).
-            RequestTimeout: the changes did not all apply within `timeout`.
+            NotChunkLeader: another peer leads, or none does yet.
+            ProposalRefused: a change is still uncommitted, or this new leader's
+                first entry is (retry after `progressed`).
+            RequestTimeout: not committed within `timeout`.
         """
         group = self._group(chunk)
-        wanted = {node_id(p) for p in holders}
-        me = node_id(self.me)
-        try:
-            async with asyncio.timeout(timeout):
-                while (change := next_change(group.node.config, wanted, factor, me)) is not None:
-                    try:
-                        await self._await_entry(
-                            group, partial(group.node.propose_conf_change, change), timeout
-                        )
-                    except ProposalRefused:  # its own no-op or a change still uncommitted
-                        group.progress.clear()
-                        await group.progress.wait()
-        except TimeoutError:
-            raise RequestTimeout(
-                f"chunk {chunk.short}: its members did not change within {timeout:g} s "
-                "(too few voters reachable)"
-            ) from None
-        return group.node.config
+        start = partial(group.node.propose_conf_change, change)
+        return await self._await_entry(group, start, timeout)
+
+    async def progressed(self, chunk: ChunkId) -> None:
+        """Until the chunk's group next applies entries here."""
+        group = self._group(chunk)
+        group.progress.clear()
+        await group.progress.wait()
+
+    def drop(self, chunk: ChunkId) -> None:
+        """Forget the chunk's group here (this peer left it): its node, its waiters
+        (they fail) and its persisted state."""
+        group = self._groups.pop(chunk, None)
+        if group is not None:
+            group.fail_all(PeerUnavailable(f"this peer left chunk {chunk.short}"))
+        self.store.raft_drop(chunk)
 
     async def catch_up(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
         """Wait until this replica has applied everything the chunk's group had
@@ -368,7 +373,7 @@ class RaftGroups:
             for message in rd.messages:
                 self.mail.post(group.chunk, message)
             if rd.snapshot is not None:
-                self._install(group, rd.snapshot.data, rd.snapshot.index)
+                install(self.states, group, rd.snapshot.data, rd.snapshot.index)
             apply_committed(self.store, group, rd.committed_entries, self._apply)
             for read in rd.read_states:
                 waiting = group.reads.get(read.context)
@@ -379,17 +384,12 @@ class RaftGroups:
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
                 self._on_change()
             group.node.advance(rd)
+            if self._on_members is not None and group.node.config.members != group.members:
+                group.members = group.node.config.members
+                self._on_members(group.chunk, self.mail.peers(group.members))
             done = group.node.log.applied - group.node.log.snapshot.index
             if self.states is not None and done >= self.compact_after:
                 compact(self.store, group, self.states.take(group.chunk))
-
-    def _install(self, group: GroupState, data: bytes, index: int) -> None:
-        """Make this replica a leader's snapshot of the chunk (the log jumped past us)."""
-        if self.states is None:
-            log.error("chunk %s: a snapshot arrived, and this peer cannot install one", group.chunk)
-            return
-        self.states.install(group.chunk, data, index)
-        group.progress.set()
 
     def _flush(self) -> None:
         """Send what every group queued (waiters re-check if anything left)."""

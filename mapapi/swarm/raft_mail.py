@@ -62,6 +62,11 @@ class RaftMail:
                 log.debug("raft messages to %s not sent: %s", peer.short, exc)
         return bool(outbox)
 
+    def peers(self, nodes: Iterable[int]) -> list[PeerId]:
+        """The peers these node ids stand for, in node order (unknown ones left out)."""
+        found = (self.peer(n) for n in sorted(nodes))
+        return [p for p in found if p is not None]
+
     def peer(self, node: int) -> PeerId | None:
         """The peer a node id stands for (None for no node, or one no member matches)."""
         if node == NONE:

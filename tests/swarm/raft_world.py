@@ -22,6 +22,7 @@ from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply_tx import applier
 from mapapi.swarm.chunk_state import StoreStates
+from mapapi.swarm.group_members import GroupMembers
 from mapapi.swarm.groups import COMPACT_AFTER, Applied, RaftGroups
 from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
@@ -37,6 +38,7 @@ class Node:
         self.world, self.id, self.path = world, peer, path
         self.store = SqliteStore(path, create=not path.exists())
         self.applied: dict[ChunkId, list[bytes]] = {}
+        self.holders: dict[ChunkId, list[PeerId]] = {}  # as the groups' configurations say
         self.changed = asyncio.Event()
         self.rpc = Rpc(ZmqTransport(peer, LamportClock()))
         self.groups = RaftGroups(
@@ -50,6 +52,7 @@ class Node:
             on_change=self.changed.set,
             states=self.states(),
             compact_after=world.compact_after,
+            on_members=self.holders.__setitem__,
         )
 
     def states(self) -> StoreStates | None:
@@ -145,6 +148,7 @@ class Writer(Ledger):
         self.commits = LogCommits(
             self.groups, self.rpc, lambda p: world.addresses[p], LamportClock()
         )
+        self.members = GroupMembers(self.groups, self.rpc, lambda p: world.addresses[p])
 
     # the TransactionBackend a Transaction needs
     name = "writer"

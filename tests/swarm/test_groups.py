@@ -20,6 +20,7 @@ from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_watch import ChainWatch
+from mapapi.swarm.group_members import change_members
 from mapapi.swarm.groups import NotChunkLeader
 from tests.swarm.raft_world import (
     Ledger,
@@ -176,7 +177,7 @@ async def test_a_second_holder_is_a_learner_that_catches_up(world: World) -> Non
     await propose_all(first, CHUNK, [b"a", b"b"])
     second = await world.add()
     second.groups.join(CHUNK)
-    config = await first.groups.change_members(CHUNK, [first.id, second.id])
+    config = await change_members(first.groups, CHUNK, [first.id, second.id])
     assert (len(config.voters), len(config.learners)) == (1, 1)  # never two voters
     await propose_all(first, CHUNK, [b"c"])  # the learner never holds a commit up
     await second.wait(lambda: second.applied.get(CHUNK) == [b"a", b"b", b"c"])
@@ -187,13 +188,13 @@ async def test_a_dead_voter_is_removed_and_a_learner_promoted(world: World) -> N
     leader = await leader_of(nodes, CHUNK)
     fourth = await world.add()
     fourth.groups.join(CHUNK)
-    config = await leader.groups.change_members(CHUNK, [*(n.id for n in nodes), fourth.id])
+    config = await change_members(leader.groups, CHUNK, [*(n.id for n in nodes), fourth.id])
     assert (len(config.voters), len(config.learners)) == (3, 1)
     dead = next(n for n in nodes if n is not leader)
     await dead.stop()
     world.nodes.remove(dead)
     living = [n.id for n in world.nodes]
-    config = await leader.groups.change_members(CHUNK, living)
+    config = await change_members(leader.groups, CHUNK, living)
     assert len(config.voters) == 3
     assert not config.learners
     await propose_all(leader, CHUNK, [b"after"])

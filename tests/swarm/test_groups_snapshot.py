@@ -8,6 +8,7 @@ from __future__ import annotations
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.swarm.group_members import change_members
 from tests.swarm.raft_world import World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 
@@ -51,7 +52,7 @@ async def test_a_holder_joining_after_compaction_catches_up_from_a_snapshot(
     assert kept.snap_index > 1  # the log before it is gone: only a snapshot can catch up
     late = await world.add(kind=Writer)
     late.groups.join(CHUNK)
-    config = await leader.groups.change_members(CHUNK, [*(n.id for n in nodes), late.id])
+    config = await change_members(leader.groups, CHUNK, [*(n.id for n in nodes), late.id])
     assert len(config.learners) == 1
     await late.wait(lambda: same_replica(late, leader))  # type: ignore[arg-type]
     assert late.store.latest([COUNTER])[COUNTER].data == b"11"
@@ -76,7 +77,7 @@ async def test_a_chunk_with_a_history_hands_it_to_every_holder_that_joins(
     await first.wait(lambda: first.groups.is_leader(CHUNK))
     second = await world.add(kind=Writer)
     second.groups.join(CHUNK)
-    await first.groups.change_members(CHUNK, [first.id, second.id])
+    await change_members(first.groups, CHUNK, [first.id, second.id])
     await second.wait(lambda: same_replica(second, first))
     assert len(second.store.chunk_commits(CHUNK)) == 3
     await second.wait(lambda: second.groups.leader(CHUNK) == first.id)

@@ -65,6 +65,9 @@ from mapapi.net.messages.peers import (
 )
 from mapapi.net.messages.raft import (
     ChainHead,
+    GroupChanged,
+    GroupJoin,
+    GroupLeave,
     RaftBatch,
     RaftEntry,
     RaftMessage,
@@ -114,6 +117,9 @@ __all__ = [
     "EvictGrant",
     "EvictRequest",
     "Evicted",
+    "GroupChanged",
+    "GroupJoin",
+    "GroupLeave",
     "Hello",
     "HolderChange",
     "Holders",

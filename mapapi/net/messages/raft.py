@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId
+from mapapi.core.ids import ChunkId, PeerId
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,10 +85,38 @@ class ChainHead:
     link: bytes
 
 
+@dataclass(frozen=True, slots=True)
+class GroupJoin:
+    """Ask the chunk's group to take the sender in as a holder."""
+
+    chunk: ChunkId
+
+
+@dataclass(frozen=True, slots=True)
+class GroupLeave:
+    """Ask the chunk's group to let the sender go."""
+
+    chunk: ChunkId
+
+
+@dataclass(frozen=True, slots=True)
+class GroupChanged:
+    """The group's members after the change, and the log index that made them so;
+    from a member that does not lead, index 0 and the `leader` to ask (None: an
+    election runs)."""
+
+    index: int
+    members: tuple[PeerId, ...] = ()
+    leader: PeerId | None = None
+
+
 BODIES: dict[str, type] = {
     "raft_batch": RaftBatch,
     "raft_propose": RaftPropose,
     "raft_proposed": RaftProposed,
     "chain_head": ChainHead,
+    "group_join": GroupJoin,
+    "group_leave": GroupLeave,
+    "group_changed": GroupChanged,
 }
 """Envelope body field -> class, for the messages of this area."""

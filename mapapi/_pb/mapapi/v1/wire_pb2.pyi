@@ -9,7 +9,7 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Envelope(_message.Message):
-    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "commit_status_query", "commit_status", "evict_request", "evict_grant", "evict_commit", "evicted", "raft_batch", "raft_propose", "raft_proposed", "chain_head")
+    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "commit_status_query", "commit_status", "evict_request", "evict_grant", "evict_commit", "evicted", "raft_batch", "raft_propose", "raft_proposed", "chain_head", "group_join", "group_leave", "group_changed")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Envelope.Kind]
@@ -68,6 +68,9 @@ class Envelope(_message.Message):
     RAFT_PROPOSE_FIELD_NUMBER: _ClassVar[int]
     RAFT_PROPOSED_FIELD_NUMBER: _ClassVar[int]
     CHAIN_HEAD_FIELD_NUMBER: _ClassVar[int]
+    GROUP_JOIN_FIELD_NUMBER: _ClassVar[int]
+    GROUP_LEAVE_FIELD_NUMBER: _ClassVar[int]
+    GROUP_CHANGED_FIELD_NUMBER: _ClassVar[int]
     request_id: int
     sender: bytes
     lamport: int
@@ -116,7 +119,10 @@ class Envelope(_message.Message):
     raft_propose: RaftPropose
     raft_proposed: RaftProposed
     chain_head: ChainHead
-    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., commit_status_query: _Optional[_Union[CommitStatusQuery, _Mapping]] = ..., commit_status: _Optional[_Union[CommitStatus, _Mapping]] = ..., evict_request: _Optional[_Union[EvictRequest, _Mapping]] = ..., evict_grant: _Optional[_Union[EvictGrant, _Mapping]] = ..., evict_commit: _Optional[_Union[EvictCommit, _Mapping]] = ..., evicted: _Optional[_Union[Evicted, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ..., raft_propose: _Optional[_Union[RaftPropose, _Mapping]] = ..., raft_proposed: _Optional[_Union[RaftProposed, _Mapping]] = ..., chain_head: _Optional[_Union[ChainHead, _Mapping]] = ...) -> None: ...
+    group_join: GroupJoin
+    group_leave: GroupLeave
+    group_changed: GroupChanged
+    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., commit_status_query: _Optional[_Union[CommitStatusQuery, _Mapping]] = ..., commit_status: _Optional[_Union[CommitStatus, _Mapping]] = ..., evict_request: _Optional[_Union[EvictRequest, _Mapping]] = ..., evict_grant: _Optional[_Union[EvictGrant, _Mapping]] = ..., evict_commit: _Optional[_Union[EvictCommit, _Mapping]] = ..., evicted: _Optional[_Union[Evicted, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ..., raft_propose: _Optional[_Union[RaftPropose, _Mapping]] = ..., raft_proposed: _Optional[_Union[RaftProposed, _Mapping]] = ..., chain_head: _Optional[_Union[ChainHead, _Mapping]] = ..., group_join: _Optional[_Union[GroupJoin, _Mapping]] = ..., group_leave: _Optional[_Union[GroupLeave, _Mapping]] = ..., group_changed: _Optional[_Union[GroupChanged, _Mapping]] = ...) -> None: ...
 
 class ErrorReply(_message.Message):
     __slots__ = ("code", "message", "conflicts", "seen_at")
@@ -597,3 +603,25 @@ class ChainHead(_message.Message):
     count: int
     link: bytes
     def __init__(self, chunk: _Optional[bytes] = ..., count: _Optional[int] = ..., link: _Optional[bytes] = ...) -> None: ...
+
+class GroupJoin(_message.Message):
+    __slots__ = ("chunk",)
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
+
+class GroupLeave(_message.Message):
+    __slots__ = ("chunk",)
+    CHUNK_FIELD_NUMBER: _ClassVar[int]
+    chunk: bytes
+    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
+
+class GroupChanged(_message.Message):
+    __slots__ = ("index", "members", "leader")
+    INDEX_FIELD_NUMBER: _ClassVar[int]
+    MEMBERS_FIELD_NUMBER: _ClassVar[int]
+    LEADER_FIELD_NUMBER: _ClassVar[int]
+    index: int
+    members: _containers.RepeatedScalarFieldContainer[bytes]
+    leader: bytes
+    def __init__(self, index: _Optional[int] = ..., members: _Optional[_Iterable[bytes]] = ..., leader: _Optional[bytes] = ...) -> None: ...

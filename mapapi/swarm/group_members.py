@@ -1,0 +1,212 @@
+"""Holders come and go through the chunk's log (DESIGN §13): joining, leaving, and
+the removal of a dead holder are membership changes the chunk's leader proposes,
+never a peer's own decision about the others.
+
+`change_members` drives `voters.next_change` through the log one single-server
+change at a time (an odd number of voters, at most the replication factor; the
+other holders learners). `GroupMembers` serves `GroupJoin` and `GroupLeave` (a
+member that does not lead answers with the leader to ask), lets
+this peer join a chunk's group from any member's address and wait until the
+leader's snapshot or log brought its replica up to the change, leave one, and,
+as the leader, removes members that liveness has declared dead for a while.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable, Iterable
+
+from mapapi.core.errors import RequestTimeout
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
+from mapapi.net.rpc import Request, Rpc
+from mapapi.swarm.group_state import AddressFn, NotChunkLeader
+from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
+from mapapi.swarm.raft_types import ConfChange, ConfChangeKind, Config, ProposalRefused
+from mapapi.swarm.raft_wire import node_id
+from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
+
+log = logging.getLogger(__name__)
+
+REMOVE_AFTER = 30.0
+"""Seconds a member stays declared dead before its chunks' leaders remove it."""
+ELECTION_PAUSE = 0.05
+"""Seconds before asking again a member that knows no leader (an election runs)."""
+
+
+async def change_members(
+    groups: RaftGroups,
+    chunk: ChunkId,
+    holders: Iterable[PeerId],
+    factor: int = DEFAULT_REPLICATION,
+    timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+) -> Config:
+    """As the chunk's leader, make `holders` the group's members, one single-server
+    change at a time, with the voters `voters.next_change` picks (an odd number,
+    at most `factor`); returns the configuration then. A new holder must have
+    called `RaftGroups.join` to take in the log.
+
+    Raises:
+        NotChunkLeader: this peer does not lead the chunk (or stopped leading).
+        RequestTimeout: the changes did not all apply within `timeout`.
+    """
+    wanted = {node_id(p) for p in holders}
+    me = node_id(groups.me)
+    try:
+        async with asyncio.timeout(timeout):
+            while (change := next_change(groups.config(chunk), wanted, factor, me)) is not None:
+                try:
+                    await groups.propose_change(chunk, change, timeout)
+                except ProposalRefused:  # its own first entry, or a change still uncommitted
+                    await groups.progressed(chunk)
+    except TimeoutError:
+        raise RequestTimeout(
+            f"chunk {chunk.short}: its members did not change within {timeout:g} s "
+            "(too few voters reachable)"
+        ) from None
+    return groups.config(chunk)
+
+
+class GroupMembers:
+    """Joining and leaving chunks' groups, and removing dead members (see the module
+    docstring).
+
+    Args:
+        groups: this peer's Raft groups.
+        rpc: serves and sends `GroupJoin` and `GroupLeave`.
+        address: where a peer is reached now.
+        factor: the replication factor (voters at most).
+    """
+
+    def __init__(
+        self,
+        groups: RaftGroups,
+        rpc: Rpc,
+        address: AddressFn,
+        factor: int = DEFAULT_REPLICATION,
+    ) -> None:
+        self.groups = groups
+        self.rpc = rpc
+        self._address = address
+        self.factor = factor
+        self._dead_since: dict[PeerId, float] = {}
+        rpc.register(GroupJoin, self.rpc_group_join)
+        rpc.register(GroupLeave, self.rpc_group_leave)
+
+    async def join(
+        self,
+        chunk: ChunkId,
+        via: PeerId,
+        timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+    ) -> GroupChanged:
+        """Become a holder of `chunk` through its member `via`, and wait until this
+        replica applied the change that added it (its state arrived with it).
+
+        Raises:
+            NotChunkLeader: the group is electing a leader (retry).
+            RequestTimeout: the change, or the state, did not arrive in time.
+            NetworkError: `via` could not be reached.
+        """
+        self.groups.join(chunk)
+        try:
+            async with asyncio.timeout(timeout):
+                changed = await self._ask(via, GroupJoin(chunk))
+                while self.groups.applied(chunk) < changed.index:
+                    await self.groups.progressed(chunk)
+        except TimeoutError:
+            self.groups.drop(chunk)
+            raise RequestTimeout(
+                f"chunk {chunk.short}: its state did not arrive within {timeout:g} s"
+            ) from None
+        except BaseException:
+            self.groups.drop(chunk)
+            raise
+        return changed
+
+    async def leave(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> None:  # noqa: ASYNC109
+        """Stop holding `chunk`: its group lets this peer go, then it forgets it.
+
+        Raises:
+            NotChunkLeader: the group is electing a leader (retry).
+            RequestTimeout, NetworkError: the leader could not be reached.
+        """
+        leader = self.groups.leader(chunk)
+        if leader is None:
+            raise NotChunkLeader(chunk, None)
+        if leader != self.groups.me:
+            async with asyncio.timeout(timeout):
+                await self._ask(leader, GroupLeave(chunk))
+        else:  # remove itself, and step down: the next leader rebalances the voters (`reap`)
+            me = ConfChange(ConfChangeKind.REMOVE_NODE, node_id(self.groups.me))
+            await self.groups.propose_change(chunk, me, timeout)
+        self.groups.drop(chunk)
+
+    async def _ask(self, member: PeerId, body: GroupJoin | GroupLeave) -> GroupChanged:
+        """Ask `member`, then the leader it names, until a leader answers (within the
+        caller's deadline; a member that knows no leader is asked again shortly)."""
+        while True:
+            changed: GroupChanged = await self.rpc.request(
+                self._address(member), body, expect=GroupChanged
+            )
+            if changed.index:
+                return changed
+            if changed.leader is not None:
+                member = changed.leader
+            else:
+                await asyncio.sleep(ELECTION_PAUSE)
+
+    async def rpc_group_join(self, req: Request) -> GroupChanged:
+        """Take the sender in as a holder of the chunk (as its leader, or through it)."""
+        body: GroupJoin = req.body
+        return await self._change(body.chunk, add=req.sender)
+
+    async def rpc_group_leave(self, req: Request) -> GroupChanged:
+        """Let the sender go from the chunk's group (as its leader, or through it)."""
+        body: GroupLeave = req.body
+        return await self._change(body.chunk, drop=req.sender)
+
+    async def _change(
+        self, chunk: ChunkId, add: PeerId | None = None, drop: PeerId | None = None
+    ) -> GroupChanged:
+        groups = self.groups
+        if not groups.is_leader(chunk):
+            return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
+        holders = {groups.me, *groups.members(chunk)} | ({add} if add else set())
+        config = await change_members(groups, chunk, holders - {drop}, self.factor)
+        members = tuple(sorted(groups.mail.peers(config.members)))
+        return GroupChanged(groups.applied(chunk), members)
+
+    async def reap(self, is_dead: Callable[[PeerId], bool], now: float) -> list[PeerId]:
+        """As the leader of each chunk, remove the members `is_dead` has said are dead
+        for `REMOVE_AFTER` seconds (by `now`, monotonic), and bring the voters back
+        to their odd target (after a leader left, say); returns the ones removed.
+
+        A member that comes back before is forgotten from the count.
+        """
+        removed: set[PeerId] = set()
+        for chunk in self.groups.led():
+            members = self.groups.members(chunk)
+            dead = [p for p in members if is_dead(p)]
+            for peer in dead:
+                self._dead_since.setdefault(peer, now)
+            gone = [p for p in dead if now - self._dead_since[p] >= REMOVE_AFTER]
+            living = {self.groups.me, *members} - set(gone)
+            wanted = {node_id(p) for p in living}
+            me = node_id(self.groups.me)
+            if next_change(self.groups.config(chunk), wanted, self.factor, me) is None:
+                continue
+            try:
+                await change_members(self.groups, chunk, living, self.factor)
+            except (NotChunkLeader, RequestTimeout) as exc:  # the next round tries again
+                log.warning("chunk %s: dead members not removed yet: %s", chunk.short, exc)
+                continue
+            if gone:
+                log.warning(
+                    "chunk %s: removed dead members %s", chunk.short, [p.short for p in gone]
+                )
+            removed |= set(gone)
+        alive = {p for p in self._dead_since if not is_dead(p)}
+        for peer in alive:
+            del self._dead_since[peer]
+        return sorted(removed)
