@@ -166,11 +166,11 @@ def plot_commit(rows: Sequence[dict[str, Any]], output: str | Path) -> None:
     """Uncontended commit latency (p50, p99) and messages per commit against holders."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
-    for writer, color in (("other", "tab:blue"), ("arbiter", "tab:green")):
+    for writer, color in (("follower", "tab:blue"), ("leader", "tab:green")):
         mine = [r for r in rows if r.get("writer", "other") == writer or int(r["holders"]) == 1]
         if not any(r.get("writer") == writer for r in mine):
             continue
-        who = "writer not the arbiter" if writer == "other" else "writer is the arbiter"
+        who = "writer follows" if writer == "follower" else "writer leads"
         _series(ax, _by(mine, "holders", "p50_ms"), f"p50, {who}", marker="o", color=color)
         _series(
             ax,

@@ -31,7 +31,7 @@ from mapbench.workers import (
 )
 
 RUN_DEADLINE = 300.0
-Writer = Literal["arbiter", "other"]
+Writer = Literal["leader", "follower"]
 
 
 def counter_swarm(workers: Sequence[WorkerProcess], a0: int = 0) -> tuple[str, str]:
@@ -190,7 +190,7 @@ def commit_latency(
     holders: int,
     n: int,
     *,
-    writer: Writer = "other",
+    writer: Writer = "follower",
     directory: str | Path | None = None,
     use_uvloop: bool = False,
     warmup: int = 50,
@@ -201,9 +201,10 @@ def commit_latency(
     Args:
         holders: peer processes holding the chunk (the writer is one of them).
         n: timed commits (one Algorithm 1 increment each, never a conflict).
-        writer: "other" commits from a holder that is not the arbiter (the
-            lowest peer id), which costs one more round trip; "arbiter" from
-            the arbiter itself. With one holder both are the same.
+        writer: "follower" commits from a holder that does not lead the chunk's
+            group, which forwards to the leader (one more round trip); "leader"
+            from the leader itself (the peer that created the chunk). With one
+            holder both are the same.
         warmup: untimed commits first (connections, caches).
         secure: a secure swarm (CurveZMQ between the peers).
 
@@ -218,8 +219,7 @@ def commit_latency(
     spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
     with _scratch(directory) as tmp, spawn(holders, Path(tmp)) as ws:
         _, item = counter_swarm(ws)
-        by_id = sorted(ws, key=lambda w: w.id)
-        chosen = by_id[0] if writer == "arbiter" else by_id[-1]
+        chosen = ws[0] if writer == "leader" else ws[-1]  # ws[0] made the chunk: it leads
         if warmup:
             run_increments([chosen], warmup, item)
         sent0, types0, cpu0 = _traffic(ws)
@@ -232,7 +232,7 @@ def commit_latency(
     return {
         "holders": holders,
         "n": n,
-        "writer": "arbiter" if chosen is by_id[0] else "other",
+        "writer": "leader" if chosen is ws[0] else "follower",
         "p50_ms": round(percentile(latencies, 0.5), 3),
         "p99_ms": round(percentile(latencies, 0.99), 3),
         "mean_ms": round(statistics.fmean(latencies), 3),

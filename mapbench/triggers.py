@@ -316,7 +316,7 @@ async def _observe(
             await peer.leave_chunk(chunk)
     elif mode == "replication":
         for chunk in owners:
-            await swarm_of(peer).locks.wait_readable(chunk)  # the round's commits are applied
+            await swarm_of(peer).groups.catch_up(chunk)  # the round's commits are applied
             follower.revisions += _learn(follower, chunk, region)
 
 

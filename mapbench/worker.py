@@ -1,6 +1,6 @@
 """A peer process for swarm experiments, driven over stdin/stdout (STYLE §7).
 
-    python -m mapbench.worker --repo DIR [--name NAME] [--lease S] [--uvloop] [--secure]
+    python -m mapbench.worker --repo DIR [--name NAME] [--uvloop] [--secure]
 
 The worker opens the repository in DIR (creating it if needed, secure with
 `--secure`: its address then carries its key, DESIGN §10), starts a peer on
@@ -229,7 +229,7 @@ async def serve(args: argparse.Namespace) -> None:
     repo = open_repo(Path(args.repo), args.name or Path(args.repo).name, args.secure)
     peer = peer_of(repo)  # the application's peer, with the map tables' rules
     try:
-        address = await peer.start(args.listen, lease=args.lease)
+        address = await peer.start(args.listen)
         _say("ready", {"id": str(peer.id), "address": address, "name": peer.name})
         worker = Worker(peer)
         reader = await _stdin_lines()
@@ -257,7 +257,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repo", required=True, help="repository folder (created if missing)")
     parser.add_argument("--name", default="", help="peer name for a new repository")
     parser.add_argument("--listen", default="tcp://127.0.0.1:0", help="zmq endpoint")
-    parser.add_argument("--lease", type=float, default=5.0, help="write-lock lease, seconds")
     parser.add_argument("--uvloop", action="store_true", help="run the event loop on uvloop")
     parser.add_argument("--secure", action="store_true", help="a new repository is secure")
     parser.add_argument("--log-level", default="WARNING", help="stderr logging level")

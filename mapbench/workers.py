@@ -36,7 +36,6 @@ class WorkerProcess:
     Args:
         folder: the child's repository folder (created if missing).
         name: the peer's name.
-        lease: write-lock lease in seconds.
         use_uvloop: run the child's event loop on uvloop.
         log: where the child's stderr goes (a file; None discards it).
         secure: a secure peer (its address carries its key; it trusts no one yet).
@@ -47,14 +46,13 @@ class WorkerProcess:
         folder: Path,
         name: str,
         *,
-        lease: float = 5.0,
         use_uvloop: bool = False,
         log: IO[str] | None = None,
         secure: bool = False,
     ) -> None:
         self.name = name
         command = [sys.executable, "-m", "mapbench.worker", "--repo", str(folder)]
-        command += ["--name", name, "--lease", str(lease)]
+        command += ["--name", name]
         command += ["--uvloop"] if use_uvloop else []
         command += ["--secure"] if secure else []
         self.proc = subprocess.Popen(
@@ -143,7 +141,6 @@ def spawn_workers(
     count: int,
     folder: Path,
     *,
-    lease: float = 5.0,
     use_uvloop: bool = False,
     secure: bool = False,
 ) -> Iterator[list[WorkerProcess]]:
@@ -162,7 +159,6 @@ def spawn_workers(
                 WorkerProcess(
                     folder / f"peer{index}",
                     f"peer{index}",
-                    lease=lease,
                     use_uvloop=use_uvloop,
                     log=log,
                     secure=secure,

@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 if TYPE_CHECKING:
+    from mapapi.core.ids import ChunkId, PeerId
     from mapapi.core.transaction import Conflict, Transaction
 
 
@@ -279,15 +280,50 @@ class DaemonDied(PeerUnavailable):
 
 
 class CommitUncertain(NetworkError):
-    """A commit was applied at its writer, but too few holders confirmed it to
-    know that it lasts: if the writer is cut off from the others, they decide
-    when they evict it (see docs/guarantees.md, Failures)."""
+    """A transaction over several chunks was prepared on all of them, but whether
+    its first chunk's log took the decision could not be learnt: the chunks'
+    leaders settle it from that log (see docs/guarantees.md, Failures)."""
 
     retriable = False
     code = 44
     advice = (
-        f"wait about {SETTLE_S} s for the holders to settle, then check with `mapctl log` "
-        "that the commit is there; do not commit it again before"
+        f"wait about {SETTLE_S} s for the chunks' leaders to settle it, then check with "
+        "`mapctl log` whether the commit is there; do not commit it again before"
+    )
+
+
+class ProposalLost(NetworkError):
+    """A proposal's log entry was overwritten by a new leader before it committed,
+    or a multi-chunk transaction was aborted: it did not take effect."""
+
+    retriable = True
+    code = 46
+    advice = "retry now: nothing was written"
+
+
+class NotChunkLeader(NetworkError):
+    """A proposal reached a peer that does not lead the chunk's group (or none
+    does yet: an election runs)."""
+
+    retriable = True
+    code = 47
+    advice = "retry now: the group elects a leader within a second or so"
+
+    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
+        self.chunk, self.leader = chunk, leader
+        where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
+        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}")
+
+
+class ChunkBusy(NetworkError):
+    """A chunk stayed held by another transaction's two-phase commit (prepared,
+    awaiting its decision) for as long as the writer could wait."""
+
+    retriable = True
+    code = 48
+    advice = (
+        f"wait about {SETTLE_S} s: a transaction over several chunks is being decided, "
+        "or settled by the chunks' leaders if its writer went away; then retry"
     )
 
 

@@ -141,6 +141,7 @@ class Transaction:
         self.state = TxState.OPEN
         self._changes: dict[ItemId, Change] = {}
         self._own: dict[ItemId, Revision] = {}  # revisions of our earlier commits
+        self._seen: dict[ItemId, int] = {}  # item -> the version's time when first written
         self._read_set: set[ItemId] = set()
         self._scopes: set[tuple[str, ChunkId | None]] = set()
 
@@ -180,9 +181,23 @@ class Transaction:
         self._scopes.update(scopes)
 
     def since(self, item_id: ItemId) -> int:
-        """The time after which a foreign write to `item_id` conflicts with us."""
+        """The time after which a foreign write to `item_id` conflicts with us: our
+        own last commit of it, else the version this replica showed when we first
+        wrote it (if older than the begin time), else the begin time."""
         own = self._own.get(item_id)
-        return own.update_time if own is not None else self.begin_time
+        if own is not None:
+            return own.update_time
+        return min(self._seen.get(item_id, self.begin_time), self.begin_time)
+
+    def _saw(self, item_id: ItemId) -> None:
+        """Note, the first time we write `item_id`, which version of it this replica
+        shows at the begin time: a commit that lands on it afterwards is a conflict
+        even if its time is not past the begin time (in a swarm, times are Lamport
+        times, and a writer elsewhere may stamp a commit below ours)."""
+        if item_id not in self._seen and item_id not in self._own:
+            revision = self._backend.read_local(item_id, self.begin_time)
+            if revision is not None:
+                self._seen[item_id] = revision.update_time
 
     # -- reads ---------------------------------------------------------------
     def _overlay(self, item_id: ItemId) -> tuple[bool, bytes | None]:
@@ -303,6 +318,7 @@ class Transaction:
         self._check_open()
         data = self._backend.table(table).encode(message)
         chunk = self._current_chunk(table, item_id)
+        self._saw(item_id)
         previous = self._changes.get(item_id)
         op = Op.INSERT if previous is not None and previous.op is Op.INSERT else Op.UPDATE
         self._changes[item_id] = Change(op, table, item_id, chunk, data)
@@ -311,6 +327,7 @@ class Transaction:
         """Buffer the removal of an item (a tombstone revision at commit)."""
         self._check_open()
         chunk = self._current_chunk(table, item_id)
+        self._saw(item_id)
         previous = self._changes.get(item_id)
         if previous is not None and previous.op is Op.INSERT:
             del self._changes[item_id]  # inserted and removed: nothing to write
@@ -321,6 +338,8 @@ class Transaction:
         """Buffer a prepared change as is (used to re-apply our side of a conflict)."""
         self._check_open()
         self._backend.table(change.table)
+        if change.op is not Op.INSERT:
+            self._saw(change.item_id)
         self._changes[change.item_id] = change
 
     def unstage(self, item_id: ItemId) -> None:

@@ -135,7 +135,6 @@ async def serve(
     advertise: str | None = None,
     stop: asyncio.Event | None = None,
     ready: Callable[[PeerRecord], None] | None = None,
-    lease: float = 5.0,
 ) -> None:
     """Run the peer of `repo` until `stop` is set (or a `shutdown` operation).
 
@@ -149,7 +148,6 @@ async def serve(
             see `advertised_address`).
         stop: set it to stop gracefully.
         ready: called with the pid file's record once everything serves.
-        lease: seconds a write lock lasts unless renewed.
 
     Raises:
         UsageError: a peer already runs on the repository.
@@ -166,7 +164,7 @@ async def serve(
         record: PeerRecord | None = None
         keeper: asyncio.Task[None] | None = None
         try:
-            record = await _go_live(repo, control, listen, join, advertise, lease)
+            record = await _go_live(repo, control, listen, join, advertise)
             keeper = asyncio.get_running_loop().create_task(_keep_members(repo, peer))
             if ready is not None:
                 ready(record)
@@ -191,12 +189,11 @@ async def _go_live(
     listen: str,
     join: Sequence[str],
     advertise: str | None,
-    lease: float,
 ) -> PeerRecord:
     """Start the peer, join (through `join`, or else the members it knew when it
     last ran), serve the control endpoint, write the pid file."""
     peer = control.ops.peer
-    bound = await peer.start(known_peers.preferred_listen(repo, listen), lease=lease)
+    bound = await peer.start(known_peers.preferred_listen(repo, listen))
     known_peers.remember_listen(repo, bound)
     assert peer.swarm is not None
     recalled = [] if join else known_peers.recall(repo)

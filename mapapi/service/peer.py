@@ -9,7 +9,6 @@ reaches every holder. It holds no protocol logic of its own and delegates to
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -29,7 +28,7 @@ from mapapi.service.tables import Tables
 from mapapi.store import ChunkInfo, MemoryStore
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm import reading
-from mapapi.swarm.commit import commit_distributed, commit_locally, refuse_shared
+from mapapi.swarm.commit import commit_locally, refuse_shared
 from mapapi.swarm.placed import Here, PlacedChunk, query_bbox
 from mapapi.swarm.triggers import Callback, Triggers
 
@@ -124,16 +123,11 @@ class Peer:
     async def close(self) -> None:
         """Leave the swarm gracefully (if on one) and release the store.
 
-        The peer leaves the holder sets of the chunks it shares, keeping its
-        replicas, so the others go on committing; `rejoin()` after the next
-        `start()` and `join()` makes it a holder again.
+        The peer stays a member of its chunks' groups: the others go on committing
+        while a majority of each group's voters is up, and the groups catch this
+        peer up when it starts again (DESIGN §13).
         """
         if self.swarm is not None:
-            try:
-                async with asyncio.timeout(self.swarm.locks.lock_timeout):
-                    await self.swarm.replicator.detach_all()
-            except TimeoutError:
-                log.warning("stopping without leaving every shared chunk (holders unreachable)")
             await self.swarm.leave()
             await self.swarm.close()
             self.swarm = None
@@ -145,7 +139,6 @@ class Peer:
         self,
         listen: str = "tcp://127.0.0.1:0",
         *,
-        lease: float = 5.0,
         shaper: Shaper | None = None,
         chord: ChordOptions | None = None,
         liveness: LivenessOptions | None = None,
@@ -154,7 +147,6 @@ class Peer:
 
         Args:
             listen: a zmq endpoint; port 0 picks a free port.
-            lease: seconds a write lock lasts unless renewed.
             shaper: simulated latency and bandwidth per link, for experiments.
             chord: periods and timeouts of the lookup ring and the time-to-live
                 of holder registrations (`mapapi.swarm.node.ChordOptions`; the
@@ -171,7 +163,6 @@ class Peer:
             self.name,
             self.store,
             self.clock,
-            lease=lease,
             shaper=shaper,
             chord=chord,
             places=self.places,
@@ -179,6 +170,7 @@ class Peer:
             liveness=liveness,
             security=self.security,
             on_applied=self.triggers.applied,
+            rules=self.rules,
         )
         address = await swarm.start(listen)
         self.swarm = swarm
@@ -368,36 +360,32 @@ class Peer:
         return reading.label_summaries(self.store, labels, only)
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
-        """Validate and apply a transaction (see `mapapi.swarm.commit`)."""
+        """Validate and apply a transaction: alone, against the store
+        (`mapapi.swarm.commit`); in a swarm, through the logs of the chunks it
+        writes (`mapapi.swarm.log_commit`), decided alike by every holder."""
         if self.swarm is not None:
-            return await commit_distributed(
-                self.store,
-                self.swarm.locks,
-                self.swarm.replicator,
-                tx,
-                message,
-                self.clock,
-                self._tables.try_merge,
-                after=self._committed,
-                rules=self.rules,
-            )
+            for chunk in sorted({c.chunk_id for c in tx.changes}):
+                self.swarm.ensure_group(chunk)  # a chunk made here has a group of one
+            done = await self.swarm.log.commit(tx, message)
+            if done.record is not None:
+                await self._announce(done.record, list(done.revisions))
+            return done.record
         refuse_shared(self.store, self.id, tx)
-        done = commit_locally(
+        local = commit_locally(
             self.store, tx, message, self.clock, self._tables.try_merge, self.rules
         )
-        if done.record is not None:
-            await self._committed(done.record, done.revisions)
-        return done.record
+        if local.record is not None:
+            self.triggers.applied(local.record, local.revisions)
+            await self._announce(local.record, local.revisions)
+        return local.record
 
-    async def _committed(self, record: CommitRecord, revisions: list[Revision]) -> None:
-        """What follows a commit of this peer, applied everywhere and (in a swarm)
-        still under its locks: the chunks' boxes are announced (DESIGN §7: a
-        query right after finds them), local triggers queued and remote
-        subscribers told (DESIGN §8)."""
+    async def _announce(self, record: CommitRecord, revisions: list[Revision]) -> None:
+        """What follows a commit of this peer: the chunks' boxes are announced
+        (DESIGN §7: a query right after finds them) and remote subscribers told
+        (DESIGN §8). In a swarm, the triggers here heard of it as it applied."""
         if self.places.caches(record.chunks):
             self.places.applied(revisions)
         await self.places.update(record.chunks)
-        self.triggers.applied(record, revisions)
         if self.swarm is not None:
             await self.swarm.subscriptions.notify(record, revisions)
 

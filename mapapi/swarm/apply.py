@@ -122,7 +122,7 @@ def decide(
         latest,
         proposal.since_of,
         read_set=reads,
-        base_of=lambda item_id: store.read(item_id, proposal.begin_time),
+        base_of=lambda item_id: store.read(item_id, proposal.since_of(item_id)),
     )
     if conflicts:
         return Outcome(conflicts=tuple(conflicts))

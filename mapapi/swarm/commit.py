@@ -1,12 +1,8 @@
-"""The writer's side of a commit: lock, validate on the current replica, apply.
-
-On a peer with no swarm the "lock" is the store's exclusive section, which also
-keeps other processes on the same repository out (`commit_locally`). In a swarm
-(`commit_distributed`) the writer write-locks every touched chunk at every
-holder, in ascending `ChunkId` order (no deadlock), validates on its own
-replica (current once every holder granted), stages one batch per chunk at
-every other holder, applies locally, and sends apply+unlock (DESIGN §5).
-Validation is the same pure function either way.
+"""A lone peer's commit: validate on the replica and apply, in the store's
+exclusive section, which also keeps other processes on the same repository out
+(`commit_locally`). In a swarm every commit goes through the chunks' Raft logs
+instead (`swarm/log_commit.py`), decided by every holder with the same pure
+validation (`swarm/apply.py`).
 """
 
 from __future__ import annotations
@@ -16,26 +12,20 @@ from typing import TYPE_CHECKING
 
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import (
-    CommitUncertain,
     ConflictError,
-    LockNotHeld,
-    LockTimeout,
     PeerNotRunning,
 )
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.ids import CommitId, ItemId, PeerId
 from mapapi.core.transaction import Change, Conflict, MergeFn, Transaction
 from mapapi.core.validate import build_revisions, validate
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.swarm import apply
-from mapapi.swarm.quorum import is_quorum
 
 if TYPE_CHECKING:  # the network stack loads only for a peer on the network
-    from collections.abc import Awaitable, Callable, Sequence
+    from collections.abc import Sequence
 
     from mapapi.swarm.commit_check import CommitRule
-    from mapapi.swarm.lock_client import Held, LockService
-    from mapapi.swarm.replication import Replicator
 
 
 @dataclass
@@ -72,20 +62,6 @@ def _decide(
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
     record = CommitRecord(CommitId.new(), time, tx.author, message, chunks, tx.author_name, tx.view)
     return Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
-
-
-def _precheck(store: Store, tx: Transaction, try_merge: MergeFn | None) -> None:
-    """Raise ConflictError now if the local replica already shows `tx` in conflict.
-
-    Called once the arbiter granted, before the other holders are asked: a
-    conflict seen here is final (history only grows), so a doomed commit costs
-    one lock at the arbiter instead of one at every holder. Passing proves
-    nothing, since this replica may lag until every holder granted; `_decide`
-    validates for real then.
-    """
-    _, _, conflicts = _validate(store, tx, try_merge)
-    if conflicts:
-        raise ConflictError(conflicts, tx, seen_at=store.clock())
 
 
 def _validate(
@@ -144,98 +120,3 @@ def refuse_shared(store: ReplicaStore, me: PeerId, tx: Transaction) -> None:
                 f"chunk {chunk.short} is shared with other peers; commit through the "
                 "running peer (`mapctl peer start --join ADDR`)"
             )
-
-
-def _check_confirmed(
-    held: Sequence[Held],
-    record: CommitRecord,
-    unconfirmed: Sequence[tuple[ChunkId, PeerId]],
-    me: PeerId,
-) -> None:
-    """Raise CommitUncertain unless, for every chunk, the holders that applied the
-    commit (this peer and those that confirmed) are a quorum of its holders:
-    only then does every later quorum, and so every eviction, include one of
-    them (`mapapi.swarm.quorum`)."""
-    missing = {(c, p) for c, p in unconfirmed}
-    for h in held:
-        applied = [p for p in h.tokens if p == me or (h.chunk, p) not in missing]
-        if not is_quorum(applied, h.tokens):
-            raise CommitUncertain(
-                f"commit {record.id.short} is applied here, but only {len(applied)} of the "
-                f"{len(h.tokens)} holders of chunk {h.chunk.short} confirmed it; if this peer "
-                "is cut off from the others, they decide whether it stays when they evict "
-                "this peer"
-            )
-
-
-def _chunks_to_lock(store: ReplicaStore, tx: Transaction) -> list[ChunkId]:
-    """Written chunks, plus the chunks a serializable transaction read, in id order."""
-    chunks = {c.chunk_id for c in tx.changes}
-    if tx.isolation == "serializable":
-        chunks |= {c for _, c in tx.scopes if c is not None}
-        chunks |= {cid for i in tx.read_set if (cid := store.item_chunk(i)) is not None}
-        for table, chunk in tx.scopes:
-            if chunk is None:
-                chunks |= {c.id for c in store.chunks(table)}
-    return sorted(chunks)
-
-
-async def commit_distributed(
-    store: ReplicaStore,
-    locks: LockService,
-    replicator: Replicator,
-    tx: Transaction,
-    message: str,
-    clock: LamportClock,
-    try_merge: MergeFn | None,
-    after: Callable[[CommitRecord, list[Revision]], Awaitable[None]] | None = None,
-    rules: Sequence[CommitRule] = (),
-) -> CommitRecord | None:
-    """Commit `tx` across every holder of the chunks it touches; `after` runs once
-    the commit is applied everywhere, while this peer still holds its own locks
-    (so the next commit to those chunks waits for it; it must not raise).
-
-    Raises:
-        ConflictError: as on one peer; every lock is released, nothing written.
-        LockTimeout, NetworkError: a holder did not grant or stage in time, or
-            a lease ran out before the commit was staged everywhere (the
-            holders' fencing refused it); nothing was applied anywhere (retriable).
-    """
-    from mapapi.swarm.lock_client import Held
-
-    held: list[Held] = []
-    decision = Decision(None, [])
-    pushed = False
-    try:
-        for chunk in _chunks_to_lock(store, tx):
-            held.append(await replicator.lock(chunk, lambda: _precheck(store, tx, try_merge)))
-        decision = _decide(store, tx, message, clock, try_merge, rules)
-        record = decision.record
-        if record is not None:
-            try:
-                unconfirmed = await replicator.push(
-                    held,
-                    record,
-                    decision.revisions,
-                    lambda: store.apply_commit(record, decision.revisions),
-                )
-            except LockNotHeld as exc:
-                raise LockTimeout(
-                    f"the write lease ran out before commit {record.id.short} was staged at "
-                    f"every holder, so it was refused and nothing was written; retry ({exc})"
-                ) from exc
-            pushed = True
-            if after is not None:
-                await after(record, decision.revisions)
-            _check_confirmed(held, record, unconfirmed, locks.me)
-    finally:
-        if decision.record is not None and not pushed:
-            await replicator.abort(held, decision.record.id)
-        for h in reversed(held):
-            # After a push, the other holders released with the apply message.
-            mine = (
-                Held(h.chunk, {p: t for p, t in h.tokens.items() if p == locks.me}) if pushed else h
-            )
-            await locks.release(mine)
-    tx.committed(decision.revisions)
-    return decision.record

@@ -4,9 +4,10 @@ Every message from a peer counts as a sign of life (`heard`); the liveness
 driver (`mapapi.swarm.liveness`) pings the peers it must watch when they are quiet.
 A peer silent for `suspect_after` seconds becomes SUSPECT, for `dead_after`
 seconds DEAD; any message makes it ALIVE again. Suspicion alone changes
-nothing but the error a request to it gets; death starts the eviction of the
-peer from the holder sets it is in (`mapapi.swarm.recovery`), which the quorum rule
-keeps safe even when the detector is wrong (a slow peer, a partition).
+nothing but the error a request to it gets; a peer dead for a while is removed
+from its chunks' groups by their leaders, through the logs
+(`mapapi.swarm.group_members`), so a wrong verdict (a slow peer, a partition)
+costs a membership change, never a second history.
 Time is a parameter (`now`, monotonic seconds).
 """
 

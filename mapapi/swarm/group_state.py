@@ -11,7 +11,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from mapapi.core.errors import MapError
+from mapapi.core.errors import ProposalLost
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
@@ -37,37 +37,6 @@ ApplyFn = Callable[[ChunkId, Entry], Applied]
 transaction)."""
 AddressFn = Callable[[PeerId], str]
 """Where a peer is reached now (the member list); raises `PeerUnavailable`."""
-
-
-class ProposalLost(MapError):
-    """A proposal's log entry was overwritten by a new leader before it committed:
-    it did not take effect, and may be proposed again."""
-
-    retriable = True
-    code = 46
-    exit_code = 5
-
-
-class ChunkBusy(MapError):
-    """A chunk stayed held by another transaction's two-phase commit (prepared,
-    awaiting its decision) for as long as the writer could wait."""
-
-    retriable = True
-    code = 48
-    exit_code = 5
-
-
-class NotChunkLeader(MapError):
-    """A proposal reached a peer that does not lead the chunk's group."""
-
-    retriable = True
-    code = 47
-    exit_code = 5
-
-    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
-        self.chunk, self.leader = chunk, leader
-        where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
-        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}; retry there")
 
 
 @dataclass

@@ -21,7 +21,15 @@ from dataclasses import dataclass
 
 from mapapi.core import codec
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import CommitUncertain, ConflictError, MapError, UsageError
+from mapapi.core.errors import (
+    ChunkBusy,
+    CommitUncertain,
+    ConflictError,
+    MapError,
+    NotChunkLeader,
+    ProposalLost,
+    UsageError,
+)
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
 from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
@@ -29,8 +37,7 @@ from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.apply import Outcome
-from mapapi.swarm.group_state import ChunkBusy, ProposalLost
-from mapapi.swarm.groups import PROPOSE_TIMEOUT, NotChunkLeader, RaftGroups
+from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.two_phase import Answer, TwoPhase
 
 RETRY_PAUSE = 0.01

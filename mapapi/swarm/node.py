@@ -1,5 +1,6 @@
-"""`Swarm`: the networked side of a peer: transport, membership, locks, replication
-and its node on the Chord ring (the lookup index).
+"""`Swarm`: the networked side of a peer: transport, membership, the Raft group of
+each chunk it holds (DESIGN §13), replication and its node on the Chord ring (the
+lookup index).
 
 It owns the RPC endpoint and every task behind it; `Peer.start()` creates it
 and `Peer.close()` closes it. Membership is simple: a joiner says Hello to any
@@ -16,12 +17,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import random
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 from mapapi.core import limits
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import JoinRefused, MapError, UsageError
+from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.chunk_places import ChunkPlaces
 from mapapi.lookup.dht.chord import ChordNode
@@ -34,14 +36,23 @@ from mapapi.net.security import Security, own_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.apply import Outcome
+from mapapi.swarm.apply_tx import applier
 from mapapi.swarm.chain_watch import ChainWatch
+from mapapi.swarm.chunk_state import StoreStates
+from mapapi.swarm.commit_check import CommitRule
+from mapapi.swarm.group_members import GroupMembers
+from mapapi.swarm.groups import Applied, RaftGroups
 from mapapi.swarm.liveness import Liveness, LivenessOptions
-from mapapi.swarm.lock import Grant
-from mapapi.swarm.lock_client import LockService
+from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.membership import Members
-from mapapi.swarm.recovery import Recovery
-from mapapi.swarm.replication import HOLDER_TTL, AppliedHook, Replicator
+from mapapi.swarm.raft_types import Entry
+from mapapi.swarm.replication import HOLDER_TTL, Replicator
 from mapapi.swarm.subscriptions import Subscriptions
+from mapapi.swarm.tx_recovery import TxRecovery
+
+AppliedHook = Callable[[CommitRecord, Sequence[Revision]], None]
+"""Called with each commit applied here, in each chunk's log order (triggers)."""
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +90,6 @@ class Swarm:
         store: ReplicaStore,
         clock: LamportClock,
         *,
-        lease: float = 5.0,
         shaper: Shaper | None = None,
         chord: ChordOptions | None = None,
         places: ChunkPlaces | None = None,
@@ -87,6 +97,7 @@ class Swarm:
         liveness: LivenessOptions | None = None,
         security: Security | None = None,
         on_applied: AppliedHook | None = None,
+        rules: Sequence[CommitRule] = (),
     ) -> None:
         self.security = security
         transport = ZmqTransport(peer_id, clock, shaper=shaper, security=security)
@@ -97,37 +108,41 @@ class Swarm:
         self._name = name
         self._peer_id = peer_id
         self.members = Members(Member(peer_id, "", name))
-        # The parts report to each other in a circle (the lock table asks liveness
-        # who is down, liveness tells recovery and the lock table, recovery drives
-        # both), so what one reports goes to a method of this swarm, given at
-        # construction, that hands it to the part that acts on it.
-        self.locks = LockService(
-            self.rpc,
-            self.members,
-            lease=lease,
-            admit=self._admit,
-            is_down=self._is_down,
-            on_overdue=self._overdue,
-            on_not_holder=self._not_holder,
-        )
         self.chord_options = chord or ChordOptions()
+        self._on_applied = on_applied
+        self._rules = tuple(rules)
+        # One Raft group per chunk held (DESIGN §13): its configuration is the holder
+        # set, its log carries every commit, multi-chunk ones in two phases.
+        self.groups = RaftGroups(
+            peer_id,
+            store,
+            self.rpc,
+            address=self.members.address,
+            apply=self._apply_entry,
+            peers=lambda: [m.id for m in self.members.all()],
+            states=StoreStates(store),
+            on_members=store.set_holders,
+        )
+        self.log = LogCommits(self.groups, self.rpc, self.members.address, clock)
+        self.tx_recovery = TxRecovery(self.log)
+        self.group_members = GroupMembers(self.groups, self.rpc, self.members.address)
+        self._decide = applier(store, self._rules)
+        self._closed: dict[ChunkId, int] = {}  # chunk -> the time up to which reads are final
         self.replicator = Replicator(
             self.rpc,
             self.members,
-            self.locks,
             store,
+            self.groups,
+            self.group_members,
             holder_ttl=self.chord_options.holder_ttl,
             places=self.places,
-            on_applied=on_applied,
         )
         self._chord: ChordNode | None = None  # made by `start()`: it needs the address
         self.subscriptions = Subscriptions(
             self.rpc, self.members, store, self.chord_options.holder_ttl
         )
         self.liveness = Liveness(self.rpc, self.members, store, liveness, events=self)
-        self.recovery = Recovery(
-            self.rpc, self.members, self.locks, store, self.replicator, self.liveness
-        )
+        self._reaper: asyncio.Task[None] | None = None
         self._store = store
         self.chains = ChainWatch(
             store, self.rpc, self.members.address, self._shared_chunks, self._other_holders
@@ -143,17 +158,42 @@ class Swarm:
         self.members.touch(peer)
         self.liveness.heard(peer)
 
-    def _admit(self, chunk: ChunkId, writer: PeerId) -> None:
-        self.replicator.admit(chunk, writer)
+    def _apply_entry(self, chunk: ChunkId, entry: Entry) -> Applied:
+        """Decide a committed entry of a chunk's log here (`apply_tx.applier`), and
+        tell the chunks' boxes and the triggers of a commit it wrote."""
+        applied = self._decide(chunk, entry)
+        outcome = applied.result
+        if isinstance(outcome, Outcome) and outcome.record is not None:
+            self.places.applied(outcome.revisions)
+            if self._on_applied is not None:
+                self._on_applied(outcome.record, outcome.revisions)
+        return applied
 
-    def _is_down(self, peer: PeerId) -> bool:
-        return self.liveness.is_dead(peer)
+    async def read_at(self, chunk: ChunkId, time: int) -> None:
+        """Make this replica of `chunk` final up to `time` before a view reads it
+        there (`LogCommits.read_at`: caught up with the leader, and no later commit
+        stamped at or before `time`); once done for a time, later reads at or
+        before it need nothing more."""
+        if self._closed.get(chunk, -1) >= time or not self.replicator.holds(chunk):
+            return
+        await self.log.read_at(chunk, time)
+        self._closed[chunk] = max(self._closed.get(chunk, -1), time)
 
-    def _overdue(self, chunk: ChunkId, grant: Grant) -> None:
-        self.recovery.overdue(chunk, grant)
+    def ensure_group(self, chunk: ChunkId) -> None:
+        """Found a group of one for a chunk this peer holds alone and that has none
+        (created here, or held since before it ran on the network)."""
+        if self.replicator.holds(chunk):
+            return
+        holders = self._store.holders(chunk)
+        self.groups.found(chunk, holders if self._peer_id in holders else [self._peer_id])
 
-    def _not_holder(self, chunk: ChunkId, holder: PeerId) -> None:
-        self.recovery.not_holder(chunk, holder)
+    async def _reap(self, every: float) -> None:
+        """Now and then, as the leader of each chunk, remove members dead for a while
+        and keep the voters odd (`GroupMembers.reap`)."""
+        while True:
+            await asyncio.sleep(every)
+            now = asyncio.get_running_loop().time()
+            await self.group_members.reap(self.liveness.is_dead, now)
 
     def _shared_chunks(self) -> list[ChunkId]:
         """The chunks this peer holds with others (their chains are compared)."""
@@ -166,20 +206,18 @@ class Swarm:
         return [p for p in holders if p != self._peer_id] if self._peer_id in holders else []
 
     def peer_down(self, peer: PeerId) -> None:
-        """`LivenessEvents`: wake the writers queued behind `peer`'s locks."""
-        self.locks.writer_down(peer)
+        """`LivenessEvents`: nothing to do at once; leaders remove a member dead
+        for a while (`_reap`), through the log."""
 
     def peer_back(self, peer: PeerId) -> None:
-        """`LivenessEvents`: tell `peer` of the chunks it was evicted from."""
-        self.recovery.back(peer)
+        """`LivenessEvents`: nothing to do; its groups catch it up by themselves."""
 
     def round_done(self) -> None:
-        """`LivenessEvents`: evict the dead holders where this peer acts."""
-        self.recovery.tick()
+        """`LivenessEvents`: nothing to do each round."""
 
     def also_watch(self) -> Iterable[PeerId]:
-        """`LivenessEvents`: the peers this one evicted, to see them back."""
-        return self.recovery.evicted()
+        """`LivenessEvents`: no peer beyond the co-holders."""
+        return ()
 
     @property
     def address(self) -> str:
@@ -200,6 +238,12 @@ class Swarm:
             timeout=options.timeout,
         )
         self.advertise(address)
+        for info in self._store.chunks():  # every group resumes; a chunk held alone gets one
+            if not self.groups.resume(info.id):
+                self.ensure_group(info.id)
+        self.groups.start()
+        self.tx_recovery.start()
+        self._reaper = asyncio.get_running_loop().create_task(self._reap(1.0), name="reap")
         self._chord.start()
         self.replicator.index_on(self._chord)
         self.index = SpatialIndex(self._chord, self.grid)
@@ -327,9 +371,10 @@ class Swarm:
         await self.replicator.refresh()
 
     async def rejoin(self) -> list[ChunkId]:
-        """Hold again the chunks this peer shared when it stopped (`Replicator.rejoin`),
-        then compare their chains with the other holders' at once; returns them."""
-        back = await self.replicator.rejoin()
+        """The chunks this peer shares with others: their groups resumed at `start`
+        and catch up by themselves; their chains are compared with the other
+        holders' at once. Returns them."""
+        back = self.replicator.shared()
         await self.chains.compare(back)
         return back
 
@@ -354,15 +399,16 @@ class Swarm:
     async def close(self) -> None:
         """Stop renewals and the ring's tasks, and close the endpoint (fails
         pending requests)."""
-        if self._merging is not None:
-            self._merging.cancel()
-            await asyncio.gather(self._merging, return_exceptions=True)
+        for task in (self._merging, self._reaper):
+            if task is not None:
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
         await self.chains.close()
         await self.liveness.close()
-        await self.recovery.close()
+        await self.tx_recovery.close()
+        await self.groups.close()
         await self.replicator.close()
         await self.subscriptions.close()
         if self._chord is not None:
             await self._chord.close()
-        await self.locks.close()
         await self.rpc.close()

@@ -1,7 +1,8 @@
 """Reading a peer's map in a swarm: a chunk not held here is fetched first (its
-holders found by asking the members), and a read of a chunk waits while a
-writer holds its lock, so no commit at or before the read time can still
-arrive (DESIGN §5). Alone (no swarm), reads go straight to the store.
+holders found by asking the members), and a read of a chunk at a time first
+makes the replica final up to that time (`Swarm.read_at`: caught up with the
+chunk's leader, and no later commit stamped at or before it; DESIGN §13).
+Alone (no swarm), reads go straight to the store.
 
 Reads by label (a mission's rows, `mapapi.store.labels`) use the store's label
 index when it keeps one, and filter the table's rows otherwise.
@@ -40,7 +41,7 @@ async def read(
             await swarm.replicator.participate(found.chunk)
     chunk = store.item_chunk(item_id)
     if chunk is not None:
-        await swarm.locks.wait_readable(chunk)
+        await swarm.read_at(chunk, time)
     return store.read(item_id, time)
 
 
@@ -54,7 +55,7 @@ async def scan(
             await swarm.replicator.participate(chunk)
         chunks = [chunk] if chunk is not None else [c.id for c in store.chunks(table)]
         for each in chunks:
-            await swarm.locks.wait_readable(each)
+            await swarm.read_at(each, time)
     return store.scan(time, table=table, chunk=chunk)
 
 
@@ -63,8 +64,8 @@ async def scan_labelled(
 ) -> list[Revision]:
     """The items of `table` labelled `label` visible at `time`: from the store's
     label index when it keeps one for `labels`, else filtered from the table's
-    rows. In a swarm, a read of the label's chunks waits while a writer holds
-    them (as `scan`)."""
+    rows. In a swarm, the label's chunks are made final up to `time` first (as
+    `scan`)."""
     if not _indexed(store, labels):
         fn = labels.of(store.tables().get(table, ""))
         rows = await scan(store, swarm, time, table, None)
@@ -72,7 +73,7 @@ async def scan_labelled(
     assert isinstance(store, LabelledStore)
     if swarm is not None:
         for chunk in store.label_chunks(label, table):
-            await swarm.locks.wait_readable(chunk)
+            await swarm.read_at(chunk, time)
     return store.scan_labelled(time, label, table=table)
 
 

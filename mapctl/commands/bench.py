@@ -93,10 +93,11 @@ def bench_viewtest(
 )
 @click.option(
     "--writer",
-    type=click.Choice(["other", "arbiter"]),
-    default="other",
+    type=click.Choice(["follower", "leader"]),
+    default="follower",
     show_default=True,
-    help="Commit from a holder that is not the arbiter (one more round trip), or from it.",
+    help="Commit from a holder that does not lead the chunk's group (it forwards to the "
+    "leader: one more round trip), or from the leader.",
 )
 @DIR_OPTION
 @UVLOOP_OPTION
@@ -117,7 +118,7 @@ def bench_commit(
     result = commit_latency(
         holders,
         n,
-        writer="arbiter" if writer == "arbiter" else "other",
+        writer="leader" if writer == "leader" else "follower",
         directory=directory,
         use_uvloop=use_uvloop,
         secure=secure,

@@ -20,7 +20,7 @@ from google.protobuf import struct_pb2
 
 from mapapi._pb.mapapi.v1 import lookup_pb2
 from mapapi.core import limits
-from mapapi.core.errors import LimitExceeded, LockNotHeld, ProtocolError, UsageError
+from mapapi.core.errors import LimitExceeded, ProtocolError, UsageError
 from mapapi.core.history import Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.lookup.dht.chord import ChordNode, key_bytes
@@ -35,12 +35,9 @@ from mapapi.net.messages import (
     ChordFindSuccessor,
     ChordStore,
     ChunkPart,
-    CommitApply,
     Hello,
-    LockRequest,
     Member,
     TableInfo,
-    Unlock,
     Welcome,
 )
 from mapapi.net.stats import OTHERS, Stats
@@ -205,23 +202,6 @@ class TestPeerState:
         peer = await make_peer()
         await peer.start("tcp://127.0.0.1:0")
         return peer
-
-    async def test_lock_messages_for_unknown_chunks_leave_no_state(
-        self, make_rpc: MakeRpc, peer: Peer
-    ) -> None:
-        assert peer.swarm is not None
-        client = await make_rpc()
-        address = peer.swarm.address
-        chunks = [ChunkId.new() for _ in range(20)]
-        for chunk in chunks:
-            with pytest.raises(LockNotHeld, match="never locked here"):
-                await client.request(address, LockRequest(chunk, token=5))
-            with pytest.raises(LockNotHeld):
-                await client.request(address, CommitApply(chunk, 1, CommitId.new()))
-            await client.request(address, Unlock(chunk, 0))
-        locks = peer.swarm.locks
-        assert all(locks.table.get(c) is None for c in chunks)
-        assert not set(chunks) & set(locks._changed)
 
     async def test_strangers_with_new_ids_cannot_grow_the_member_list_without_end(
         self, make_rpc: MakeRpc, peer: Peer, monkeypatch: pytest.MonkeyPatch

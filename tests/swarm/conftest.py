@@ -12,7 +12,7 @@ from collections.abc import Awaitable, Callable, Sequence
 
 import pytest
 
-from mapapi import ChunkId, ConflictError, ItemId, LockTimeout, Peer
+from mapapi import ChunkId, ConflictError, ItemId, NetworkError, Peer
 from mapapi._pb.mapapi.v1.types_pb2 import Account, Counter
 from mapapi.lookup.dht.ring import SortedRing
 from mapapi.swarm.node import ChordOptions
@@ -28,18 +28,12 @@ __all__ = ["ACCOUNTS", "TABLE", "Account", "Counter", "MakeSwarm"]
 
 @pytest.fixture
 def swarm(make_peer: Callable[..., Awaitable[Peer]]) -> MakeSwarm:
-    """Factory: n started peers, all joined through the first.
+    """Factory: n started peers, all joined through the first."""
 
-    `lease` is the write-lock lease in seconds; `lock_timeout` how long a
-    writer waits for a grant before `LockTimeout`.
-    """
-
-    async def _swarm(n: int, lease: float = 5.0, lock_timeout: float | None = None) -> list[Peer]:
+    async def _swarm(n: int) -> list[Peer]:
         peers = [await make_peer() for _ in range(n)]
         for peer in peers:
-            await peer.start("tcp://127.0.0.1:0", lease=lease)
-            if lock_timeout is not None:
-                net(peer).locks.lock_timeout = lock_timeout
+            await peer.start("tcp://127.0.0.1:0")
         for peer in peers[1:]:
             await peer.join(peers[0].address)
         return peers
@@ -96,18 +90,18 @@ async def increment(
             tx.update(table, item, Counter(name=current.name, value=current.value + 1))
         try:
             await tx.commit(message)
-        except (ConflictError, LockTimeout):
+        except (ConflictError, NetworkError):
             retries += 1
             continue
         return retries
 
 
 async def log_ids(peer: Peer) -> list[str]:
-    """The ids of every commit in a peer's log, newest first, once no writer
-    holds any of its chunks (a writer's commit returns when it sent the
-    apply+unlock, which a holder may not have processed yet)."""
+    """The ids of every commit in a peer's log, newest first, once its replicas
+    caught up with their chunks' leaders (a commit returns once a majority holds
+    it, before every holder applied it)."""
     for chunk in peer.chunks():
-        await net(peer).locks.wait_readable(chunk.id)
+        await net(peer).groups.catch_up(chunk.id)
     return [str(c.id) for c in peer.log()]
 
 

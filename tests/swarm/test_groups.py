@@ -14,14 +14,13 @@ import pytest
 
 from mapapi.core import codec
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import ConflictError, RequestTimeout
+from mapapi.core.errors import ConflictError, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.group_members import change_members
-from mapapi.swarm.groups import NotChunkLeader
 from tests.swarm.raft_world import (
     Ledger,
     Node,

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from mapapi import NotParticipatingError, Peer
+from mapapi import Peer
 from mapapi.core.errors import PeerNotRunning
 from mapapi.store import SqliteStore
 
-from .conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, net, share, value
+from .conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, share, value
 
 
 class TestGracefulStop:
@@ -38,13 +38,6 @@ class TestGracefulStop:
         finally:
             await again.close()
 
-    async def test_a_stopping_last_holder_keeps_its_chunk(self, swarm: MakeSwarm) -> None:
-        (a,) = await swarm(1)
-        chunk, _ = await counter_chunk(a)
-        await net(a).replicator.detach_all()
-        assert chunk in {c.id for c in a.chunks()}
-        assert a.holders(chunk) == [a.id]
-
 
 class TestStaleHolders:
     async def test_a_peer_alone_refuses_to_commit_to_a_shared_chunk(self, swarm: MakeSwarm) -> None:
@@ -65,15 +58,3 @@ class TestStaleHolders:
         finally:
             await alone.close()
         assert await value(a, item) == 0
-
-    async def test_a_holder_refuses_the_lock_to_a_peer_it_does_not_list(
-        self, swarm: MakeSwarm
-    ) -> None:
-        a, b, c = await swarm(3)
-        chunk, item = await counter_chunk(a)
-        await share(chunk, [b])
-        with pytest.raises(NotParticipatingError, match="participate"):
-            await net(c).locks.acquire(chunk, [a.id, b.id])
-        # c got no lease anywhere, so a holder's commit goes straight through.
-        await increment(b, [(TABLE, item)])
-        assert await value(a, item) == 1

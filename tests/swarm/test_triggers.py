@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 import threading
 
-from mapapi import ConflictError, ItemId, LockTimeout, Peer
+from mapapi import ConflictError, ItemId, NetworkError, Peer
 from mapapi.swarm.triggers import CommitEvent
 
 from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, log_ids, share, value
@@ -40,7 +40,7 @@ def bump_below_limit(peer: Peer, item: ItemId, fired: list[int]) -> object:
             try:
                 await tx.commit(f"{peer.name}: {current.value + 1}")
                 return
-            except (ConflictError, LockTimeout):
+            except (ConflictError, NetworkError):
                 continue
 
     return trigger

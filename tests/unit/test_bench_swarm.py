@@ -80,7 +80,7 @@ def test_plots_are_written(tmp_path: Path) -> None:
                 {"holders": k, "writer": w, "p50_ms": k, "p99_ms": 2 * k, "messages_per_commit": k}
             )
             for k in (1, 2, 3)
-            for w in ("other", "arbiter")
+            for w in ("follower", "leader")
         )
         + "\n\n"
     )
@@ -106,15 +106,15 @@ def test_viewtest_command_prints_the_promised_json(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_commit_latency_counts_messages_of_every_holder(tmp_path: Path) -> None:
-    figures = commit_latency(2, 5, writer="arbiter", directory=tmp_path, warmup=1)
-    assert figures["writer"] == "arbiter"
-    # lock, stage and apply+unlock at the one other holder: a request and a reply each
-    assert figures["messages_per_commit"] == 6.0
+    figures = commit_latency(2, 5, writer="leader", directory=tmp_path, warmup=1)
+    assert figures["writer"] == "leader"
+    # at least the entry's append to the other holder and its answer (heartbeats add more)
+    assert figures["messages_per_commit"] >= 2.0
     assert figures["p50_ms"] > 0
 
 
 @pytest.mark.slow
 def test_a_secure_swarm_commits_with_the_same_messages(tmp_path: Path) -> None:
-    figures = commit_latency(2, 5, writer="arbiter", directory=tmp_path, warmup=1, secure=True)
+    figures = commit_latency(2, 5, writer="leader", directory=tmp_path, warmup=1, secure=True)
     assert figures["secure"] is True
-    assert figures["messages_per_commit"] == 6.0  # CurveZMQ adds no message, only bytes
+    assert figures["messages_per_commit"] >= 2.0  # the same protocol over CurveZMQ
