@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from mapapi.core import codec
 from mapapi.core.chunk_state import ChunkState, TxState
+from mapapi.core.errors import ChunkNotFound
 from mapapi.core.ids import ChunkId
 from mapapi.store.base import ReplicaStore, TxRow
 
@@ -59,6 +60,11 @@ class StoreStates:
                 store.raft_tx_put(chunk, tx.commit_id, TxRow(tx.state, tx.time, tx.data))
             store.raft_applied(chunk, index, state.time)
 
-    def holds(self, chunk: ChunkId) -> bool:
-        """Whether the store has history for the chunk (a founder with a state to hand on)."""
-        return bool(self.store.chunk_commits(chunk))
+    def knows(self, chunk: ChunkId) -> bool:
+        """Whether the store has the chunk (a founder with a state to hand on: its
+        table at least, and any history from before the group)."""
+        try:
+            self.store.chunk_table(chunk)
+        except ChunkNotFound:
+            return False
+        return True

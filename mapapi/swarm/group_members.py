@@ -91,6 +91,7 @@ class GroupMembers:
         self._address = address
         self.factor = factor
         self._dead_since: dict[PeerId, float] = {}
+        self._changing: dict[ChunkId, asyncio.Lock] = {}  # one membership change at a time
         rpc.register(GroupJoin, self.rpc_group_join)
         rpc.register(GroupLeave, self.rpc_group_leave)
 
@@ -104,24 +105,23 @@ class GroupMembers:
         replica applied the change that added it (its state arrived with it).
 
         Raises:
-            NotChunkLeader: the group is electing a leader (retry).
-            RequestTimeout: the change, or the state, did not arrive in time.
+            RequestTimeout: the change, or the state, did not arrive in time (this
+                peer stays in the group: its state may still arrive).
             NetworkError: `via` could not be reached.
         """
-        self.groups.join(chunk)
+        if self.groups.store.raft_load(chunk) is None:
+            self.groups.join(chunk)
         try:
             async with asyncio.timeout(timeout):
                 changed = await self._ask(via, GroupJoin(chunk))
                 while self.groups.applied(chunk) < changed.index:
                     await self.groups.progressed(chunk)
         except TimeoutError:
-            self.groups.drop(chunk)
+            # The leader may have taken us in already: a member keeps its log (it
+            # must not come back empty), and its state arrives later.
             raise RequestTimeout(
                 f"chunk {chunk.short}: its state did not arrive within {timeout:g} s"
             ) from None
-        except BaseException:
-            self.groups.drop(chunk)
-            raise
         return changed
 
     async def leave(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> None:  # noqa: ASYNC109
@@ -172,8 +172,11 @@ class GroupMembers:
         groups = self.groups
         if not groups.is_leader(chunk):
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
-        holders = {groups.me, *groups.members(chunk)} | ({add} if add else set())
-        config = await change_members(groups, chunk, holders - {drop}, self.factor)
+        # One change of a chunk's members at a time, each from the members then: two
+        # joins computed side by side would each take the other out again.
+        async with self._changing.setdefault(chunk, asyncio.Lock()):
+            holders = {groups.me, *groups.members(chunk)} | ({add} if add else set())
+            config = await change_members(groups, chunk, holders - {drop}, self.factor)
         members = tuple(sorted(groups.mail.peers(config.members)))
         return GroupChanged(groups.applied(chunk), members)
 
@@ -197,7 +200,8 @@ class GroupMembers:
             if next_change(self.groups.config(chunk), wanted, self.factor, me) is None:
                 continue
             try:
-                await change_members(self.groups, chunk, living, self.factor)
+                async with self._changing.setdefault(chunk, asyncio.Lock()):
+                    await change_members(self.groups, chunk, living, self.factor)
             except (NotChunkLeader, RequestTimeout) as exc:  # the next round tries again
                 log.warning("chunk %s: dead members not removed yet: %s", chunk.short, exc)
                 continue

@@ -149,9 +149,9 @@ class RaftGroups:
         self.store.raft_applied(
             chunk, 1, max((c.time for c in self.store.chunk_commits(chunk)), default=0)
         )
-        if self.states is not None and self.states.holds(chunk):
-            # A chunk with a history from before its group: the log starts from a
-            # snapshot of it, which every member that joins receives.
+        if self.states is not None and self.states.knows(chunk):
+            # The log starts from a snapshot of the chunk (its table, and any history
+            # from before the group), which every member that joins receives.
             compact(self.store, self._groups[chunk], self.states.take(chunk))
         if config.voters == {node_id(self.me)}:
             self._groups[chunk].node.campaign()
