@@ -33,6 +33,7 @@ from mapapi.service.watch_ops import WatchOperations
 from mapapi.service.workspace import Workspace
 
 if TYPE_CHECKING:
+    from mapapi.service.loop_lag import LoopLag
     from mapapi.service.repo import PeerRecord
 
 
@@ -52,15 +53,21 @@ def memory_peer() -> Peer:
     return Peer.in_memory(rules=map_rules())
 
 
-def operations(peer: Peer, *, on_shutdown: Callable[[], None] | None = None) -> Operations:
+def operations(
+    peer: Peer,
+    *,
+    on_shutdown: Callable[[], None] | None = None,
+    loop_lag: LoopLag | None = None,
+) -> Operations:
     """Every operation `mapctl` runs, over `peer`: the repository's, the views',
-    the swarm's, watches, the maps' and (`on_shutdown` given: in a daemon) `shutdown`."""
+    the swarm's (`peer status` with the daemon's `loop_lag`), watches, the maps'
+    and (`on_shutdown` given: in a daemon) `shutdown`."""
     return Operations(
         peer,
         (
             RepoOperations(peer),
             ViewOperations(peer, Workspace(peer)),
-            SwarmOperations(peer),
+            SwarmOperations(peer, loop_lag),
             WatchOperations(peer),
             MapOperations(peer),
             DaemonOperations(on_shutdown),

@@ -28,7 +28,8 @@ from mapapi.core import limits
 from mapapi.core.errors import ConflictError, LimitExceeded, MapError, ProtocolError
 from mapapi.core.ids import PeerId
 from mapapi.core.transaction import Conflict
-from mapapi.net import fields, messages
+from mapapi.net import fields, messages, raft_codec
+from mapapi.net.messages import RaftBatch
 
 B = TypeVar("B")
 
@@ -148,6 +149,7 @@ def _fill_payload(b: Ping | Pong, m: Any) -> None:
 
 _register("error", ErrorReply, _fill_error, _read_error)
 _register_swarm_bodies()
+_register("raft_batch", RaftBatch, raft_codec.fill_batch, raft_codec.read_batch)  # the hot path
 _register("ping", Ping, _fill_payload, lambda m: Ping(m.payload))
 _register("pong", Pong, _fill_payload, lambda m: Pong(m.payload))
 

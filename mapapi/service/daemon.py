@@ -27,6 +27,7 @@ from urllib.parse import urlsplit
 from mapapi.core.errors import MapError
 from mapapi.service import known_peers
 from mapapi.service.daemon_process import LOG_ENV, refuse_if_running
+from mapapi.service.loop_lag import LoopLag
 from mapapi.service.peer_lock import PeerLock
 from mapapi.service.repo import PeerRecord
 from mapapi.swarm import faults
@@ -158,9 +159,11 @@ async def serve(
     faults.arm_from_env(os.environ)  # failure tests: see mapapi.swarm.faults
     stop = stop or asyncio.Event()
     lock = PeerLock.acquire(repo)
+    lag = LoopLag()  # how late the loop runs: `peer status` (issue 14 §1)
+    lag.start()
     try:
         peer = open_peer(repo)
-        control = ControlServer(operations(peer, on_shutdown=stop.set))
+        control = ControlServer(operations(peer, on_shutdown=stop.set, loop_lag=lag))
         record: PeerRecord | None = None
         keeper: asyncio.Task[None] | None = None
         try:
@@ -180,6 +183,7 @@ async def serve(
             if record is not None:
                 repo.remove_peer_record(record.pid)
     finally:
+        await lag.close()
         lock.release()
 
 

@@ -35,6 +35,7 @@ from mapapi.store.file_check import locate_payload
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
     from mapapi.core.transaction import Change, Conflict
+    from mapapi.service.loop_lag import LoopLag
     from mapapi.service.peer import Peer
     from mapapi.store.base import IdKind
 
@@ -54,8 +55,15 @@ class OperationsFactory(Protocol):
     """What builds the full `Operations` of a peer (`mapapi.app.operations`);
     the peer daemon takes one, so the application decides which sets it serves."""
 
-    def __call__(self, peer: Peer, *, on_shutdown: Callable[[], None] | None = None) -> Operations:
-        """The operations over `peer`; `on_shutdown` stops the daemon serving them."""
+    def __call__(
+        self,
+        peer: Peer,
+        *,
+        on_shutdown: Callable[[], None] | None = None,
+        loop_lag: LoopLag | None = None,
+    ) -> Operations:
+        """The operations over `peer`; `on_shutdown` stops the daemon serving them,
+        `loop_lag` watches its event loop (`peer status` reports it)."""
 
 
 class Caller(Protocol):

@@ -20,6 +20,7 @@ from mapapi.service.fsck import divergence_json, rollback_text
 from mapapi.service.ops import Operation, check_address, resolve_id
 
 if TYPE_CHECKING:
+    from mapapi.service.loop_lag import LoopLag
     from mapapi.service.peer import Peer, PlacedChunk
 
 Json = Any
@@ -55,10 +56,17 @@ def placed_json(found: PlacedChunk) -> Json:
 
 
 class SwarmOperations:
-    """The peer's swarm: members, chunks it replicates, spatial queries, traffic."""
+    """The peer's swarm: members, chunks it replicates, spatial queries, traffic.
 
-    def __init__(self, peer: Peer) -> None:
+    Args:
+        peer: the peer.
+        loop_lag: the watch over the daemon's event loop (None: not watched,
+            `peer_status` reports no lag).
+    """
+
+    def __init__(self, peer: Peer, loop_lag: LoopLag | None = None) -> None:
         self.peer = peer
+        self.loop_lag = loop_lag
         self._progress: dict[str, tuple[int, int]] = {}  # chunk -> (parts received, parts)
 
     def operations(self) -> Mapping[str, Operation]:
@@ -78,7 +86,8 @@ class SwarmOperations:
     async def peer_status(self) -> Json:
         """This peer: id, name, the address others join through, every member; the
         chunks whose hash chain differs from another holder's, and how far the store
-        fell behind its high-water mark (issue 18 §3)."""
+        fell behind its high-water mark (issue 18 §3); how late its event loop
+        ran over the last minute, in ms (issue 14 §1)."""
         peer = online(self.peer)
         assert peer.swarm is not None
         members = [
@@ -94,6 +103,7 @@ class SwarmOperations:
             "chunks": len(peer.chunks()),
             "diverged": [divergence_json(d) for d in peer.store.divergences()],
             "rollback": [rollback_text(r) for r in peer.store.rollbacks()],
+            "loop_lag_ms": None if self.loop_lag is None else self.loop_lag.summary().as_json(),
         }
 
     async def peers(self) -> Json:

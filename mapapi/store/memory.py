@@ -272,6 +272,9 @@ class MemoryStore(MemoryChains):
             # installing the chunk again would skip them as applied already
             for _, applied in self._commits.values():
                 applied[:] = [r for r in applied if r.chunk_id != chunk_id]
+            # so do the chain (installing the chunk again rebuilds it); what other
+            # holders' chains showed of this replica goes with it
+            self._diverged = {k: v for k, v in self._diverged.items() if k[0] != chunk_id}
 
     # -- the Raft group of each chunk ---------------------------------------------------
     def raft_load(self, chunk_id: ChunkId) -> RaftRecord | None:
@@ -360,4 +363,3 @@ class MemoryStore(MemoryChains):
         with self._lock:
             self._raft.pop(chunk_id, None)
             self._tx = {k: v for k, v in self._tx.items() if k[0] != chunk_id}
-            self._chains.pop(chunk_id, None)

@@ -139,9 +139,9 @@ def chunk_time(con: sqlite3.Connection, chunk: str) -> int:
 
 
 def drop(con: sqlite3.Connection, chunk: str) -> None:
-    """Forget `chunk`'s group (this peer no longer holds the chunk)."""
+    """Forget `chunk`'s group (this peer no longer holds the chunk). Its hash chain
+    stays: it is the replica's (`chain_sql`), linked on every commit path."""
     con.execute("DELETE FROM raft_log WHERE chunk_id = ?", (chunk,))
-    con.execute("DELETE FROM raft_chain WHERE chunk_id = ?", (chunk,))
     con.execute("DELETE FROM raft_tx WHERE chunk_id = ?", (chunk,))
     con.execute("DELETE FROM raft_state WHERE chunk_id = ?", (chunk,))
 

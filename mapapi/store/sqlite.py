@@ -385,7 +385,9 @@ class SqliteStore(SqliteChains):
             raft_sql.drop(con, chunk_id)
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
-        """Forget a chunk's replica (this peer left it); commit records stay."""
+        """Forget a chunk's replica (this peer left it); commit records stay, and so
+        does its chain (installing it again rebuilds it), but not its divergences."""
         con = self._con()
         with self._write(con):
             sqlite_replica.drop(con, chunk_id)
+            chain_sql.forget(con, chunk_id)

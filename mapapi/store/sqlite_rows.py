@@ -136,9 +136,11 @@ def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     clauses: list[str] = []
     args: list[object] = []
     if table is not None:
-        clauses.append("table_name = ?")
+        # A chunk holds rows of one table: given both, the unary + keeps SQLite
+        # from reading the table's index (every chunk of it) instead of the chunk's.
+        clauses.append("+r.table_name = ?" if chunk is not None else "r.table_name = ?")
         args.append(table)
     if chunk is not None:
-        clauses.append("chunk_id = ?")
+        clauses.append("r.chunk_id = ?")
         args.append(chunk)
-    return "".join(f" AND r.{c}" for c in clauses), args
+    return "".join(f" AND {c}" for c in clauses), args

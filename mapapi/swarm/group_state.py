@@ -11,7 +11,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from mapapi.core.errors import ProposalLost
+from mapapi.core.errors import ProposalLost, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
@@ -75,6 +75,25 @@ class GroupState:
             if not done.done():
                 done.set_exception(error)
         self.waiting.clear()
+
+
+def not_committed(
+    group: GroupState, index: int, timeout: float, peer_of: Callable[[int], PeerId | None]
+) -> RequestTimeout:
+    """The error of a proposal whose entry did not commit in time: how many voters
+    hold it, and which did not answer (as this peer, the leader, knows)."""
+    voters = group.node.config.voters
+    lacking = group.node.lacking(index)
+    if not lacking:
+        why = "this peer stopped leading it" if group.role is not Role.LEADER else "no answer"
+        return RequestTimeout(
+            f"chunk {group.chunk.short}: entry {index} not committed within {timeout:g} s ({why})"
+        )
+    names = ", ".join(p.short if (p := peer_of(n)) else f"node {n}" for n in lacking)
+    return RequestTimeout(
+        f"no quorum for chunk {group.chunk.short}: {len(voters) - len(lacking)} of {len(voters)} "
+        f"voters hold entry {index} after {timeout:g} s ({names} did not answer)"
+    )
 
 
 def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:

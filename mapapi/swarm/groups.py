@@ -38,6 +38,7 @@ from mapapi.swarm.group_state import (
     apply_committed,
     compact,
     install,
+    not_committed,
     persist,
 )
 from mapapi.swarm.raft import RaftNode
@@ -320,10 +321,7 @@ class RaftGroups:
                 return await done
         except TimeoutError:
             group.waiting.pop(index, None)
-            raise RequestTimeout(
-                f"chunk {group.chunk.short}: entry {index} not committed within {timeout:g} s "
-                "(too few voters reachable)"
-            ) from None
+            raise not_committed(group, index, timeout, self._peer) from None
 
     def _group(self, chunk: ChunkId) -> GroupState:
         group = self._groups.get(chunk)

@@ -57,6 +57,14 @@ class Leader:
     def _sync_config(self) -> None:
         raise NotImplementedError
 
+    def lacking(self, index: int) -> list[int]:
+        """The other voters that, as far as this leader knows, have not persisted
+        entry `index` (none when this node does not lead): who keeps it uncommitted."""
+        if self.role is not Role.LEADER:
+            return []
+        voters = sorted(self.config.voters - {self.id})
+        return [n for n in voters if n in self._progress and self._progress[n].match < index]
+
     # -- leader (paper §5.3) -----------------------------------------------------------------
 
     def _tick_leader(self) -> None:

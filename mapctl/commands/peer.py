@@ -144,6 +144,11 @@ def peer_status(session: Session, as_json: bool) -> None:
         render.line(f"  join:    {info['join']}")
         render.line(f"  control: {info['control']}")
         render.line(f"  swarm:   {len(info['members'])} member(s), {info['chunks']} chunk(s) here")
+        if (lag := info.get("loop_lag_ms")) is not None:
+            render.line(
+                f"  loop:    late by p50 {lag['p50']} ms, p99 {lag['p99']} ms, "
+                f"max {lag['max']} ms over the last minute"
+            )
         render.history_warnings(info)
 
 

@@ -141,6 +141,7 @@ class TestThroughTheDaemon:
         assert record.address.startswith("tcp://127.0.0.1:")
         assert not record.address.endswith(":0")
         status = await daemon.json("peer", "status")
+        assert set(status.pop("loop_lag_ms")) == {"p50", "p99", "max"}
         assert status == {
             "running": True,
             "id": record.id,

@@ -102,14 +102,15 @@ def test_an_entry_applied_twice_is_caught() -> None:
         node.apply(committed)
 
 
-def test_bench_sim_runs_seeds_in_both_modes_and_reports_counts() -> None:
-    """`mapctl bench sim`'s runner: both modes, summed counts, no violation."""
+def test_bench_sim_runs_seeds_in_every_mode_and_reports_counts() -> None:
+    """`mapctl bench sim`'s runner: the three modes, summed counts, no violation."""
     result = run_seeds(3, 2)
-    assert result["runs"] == 4
+    assert result["runs"] == 6
     assert result["violations"] == []
     assert result["core"]["acked"] > 0
     assert result["commits"]["commits"] > 0
     assert result["commits"]["acked"] <= result["commits"]["commits"]
+    assert result["tx"]["transactions"] >= result["tx"]["acked"] > 0
 
 
 def test_a_snapshot_from_a_leader_replaces_the_whole_stored_log(

@@ -4,6 +4,8 @@ the leader after a while, never by a peer on its own."""
 
 from __future__ import annotations
 
+import asyncio
+
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.group_members import REMOVE_AFTER
@@ -92,3 +94,18 @@ async def test_a_dead_member_is_removed_by_the_leader_only_after_a_while(world: 
     assert node_id(dead.id) not in config.members
     assert len(config.voters) == 1  # two holders: one voter and one learner, never two voters
     await write(leader, b"after")
+
+
+async def test_peers_joining_at_once_all_end_up_members(world: World) -> None:
+    """Each change is computed from the members after the one before: two joins
+    computed side by side would take each other out again, and again."""
+    _, leader = await group(world)
+    newcomers = [await world.add(kind=Writer) for _ in range(3)]
+    before = leader.groups.applied(CHUNK)
+    await asyncio.gather(*(n.members.join(CHUNK, via=leader.id) for n in newcomers))
+    config = leader.groups.config(CHUNK)
+    assert {node_id(n.id) for n in newcomers} <= config.members
+    assert len(config.voters) == 3  # the founders; the newcomers learn
+    assert leader.groups.applied(CHUNK) - before <= 2 * len(newcomers)  # no churn
+    for node in newcomers:
+        assert value(node) == b"0"

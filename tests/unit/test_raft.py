@@ -245,6 +245,17 @@ class TestReplication:
         net.propose(1, b"a", b"b", b"c")
         assert net.data(1) == net.data(2) == net.data(3) == [b"a", b"b", b"c"]
 
+    def test_the_leader_names_the_voters_an_entry_waits_for(self) -> None:
+        net = Network()
+        net.elect(1)
+        net.isolate(3)
+        [(index, _)] = net.propose(1, b"x")
+        assert net.nodes[1].lacking(index) == [3]  # committed by 1 and 2; 3 lacks it
+        net.isolate(2)
+        [(later, _)] = net.propose(1, b"y")
+        assert net.nodes[1].lacking(later) == [2, 3]
+        assert net.nodes[2].lacking(later) == []  # a follower names nobody
+
     def test_follower_refuses_a_proposal_naming_the_leader(self) -> None:
         net = Network()
         net.elect(1)

@@ -109,6 +109,16 @@ def test_divergences_are_kept_until_the_chains_agree_past_them(store: ReplicaSto
     assert store.divergences() == []
 
 
+def test_the_chain_is_the_replicas_and_outlives_its_raft_group(store: ReplicaStore) -> None:
+    store.raft_save(A, hard=(1, 0, 0))
+    store.apply_commit(*commit(1, A))
+    store.raft_drop(A)
+    assert store.chain_length(A) == 1
+    store.diverged(Divergence(A, AUTHOR, 1, "differs", 0.0))
+    store.drop_chunk(A)  # the replica goes, and what other holders' chains showed of it
+    assert store.divergences() == []
+
+
 # -- SQLite only: an older store, the high-water mark -------------------------------------
 def sqlite_store(path: Path) -> SqliteStore:
     made = SqliteStore(path, create=True)
