@@ -88,6 +88,19 @@ class TransactionBackend(Protocol):
     async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
         """Items visible at `time` in a table or one of its chunks."""
 
+    async def catch_up(
+        self,
+        time: int,
+        *,
+        item: ItemId | None = None,
+        table: str = "",
+        chunk: ChunkId | None = None,
+    ) -> int:
+        """Before the first read of a view begun now (at `time`): bring what that
+        read touches (`item`'s chunk, else `chunk`, else every chunk of `table`)
+        up to date, and return the time the view reads at from then on: `time`,
+        or later, as if the view had begun once they were up to date."""
+
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         """Validate and apply `tx`'s changes; raises ConflictError."""
 
@@ -129,6 +142,7 @@ class Transaction:
         *,
         isolation: Isolation = "snapshot",
         view: str = "",
+        fresh: bool = False,
     ) -> None:
         if isolation not in ISOLATIONS:
             raise UsageError(f"isolation must be one of {ISOLATIONS}, not {isolation!r}")
@@ -144,6 +158,9 @@ class Transaction:
         self._seen: dict[ItemId, int] = {}  # item -> the version's time when first written
         self._read_set: set[ItemId] = set()
         self._scopes: set[tuple[str, ChunkId | None]] = set()
+        # Begun "now" and nothing read, written or committed yet: the first read may
+        # move the begin time forward (`_first_read`).
+        self._fresh = fresh
 
     # -- state -------------------------------------------------------------
     def _transition_to(self, target: TxState) -> None:
@@ -157,6 +174,12 @@ class Transaction:
     def _check_open(self) -> None:
         if self.state is not TxState.OPEN:
             raise ViewClosedError(f"transaction is {self.state.name}, not OPEN")
+
+    def _writing(self) -> None:
+        """A write begins: the transaction must be open, and is no longer fresh
+        (a written view keeps its begin time)."""
+        self._check_open()
+        self._fresh = False
 
     @property
     def changes(self) -> list[Change]:
@@ -200,6 +223,21 @@ class Transaction:
                 self._seen[item_id] = revision.update_time
 
     # -- reads ---------------------------------------------------------------
+    async def _first_read(
+        self, *, item: ItemId | None = None, table: str = "", chunk: ChunkId | None = None
+    ) -> None:
+        """Before the first read of a fresh view, let the backend bring what it reads
+        up to date, and move the begin time to the time it answers: the same as
+        having begun a moment later, so commits acknowledged elsewhere before the
+        view's first read are seen (in a swarm, a commit returns once a majority of
+        holders took it, and Lamport times do not order real time across peers).
+        A view that has read or written already stays at its time."""
+        if not self._fresh:
+            return
+        self._fresh = False
+        moved = await self._backend.catch_up(self.begin_time, item=item, table=table, chunk=chunk)
+        self.begin_time = max(self.begin_time, moved)
+
     def _overlay(self, item_id: ItemId) -> tuple[bool, bytes | None]:
         """(known, data) from our own buffer or earlier commits."""
         change = self._changes.get(item_id)
@@ -216,6 +254,7 @@ class Transaction:
         self._read_set.add(item_id)
         known, data = self._overlay(item_id)
         if not known:
+            await self._first_read(item=item_id)
             revision = await self._backend.read(item_id, self.begin_time)
             if revision is None or revision.removed:
                 return None
@@ -232,6 +271,7 @@ class Transaction:
         if chunk is not None and self._backend.chunk_table(chunk) != table:
             raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
         self._scopes.add((table, chunk))
+        await self._first_read(table=table, chunk=chunk)
         found: dict[ItemId, bytes] = {
             r.item_id: r.data for r in await self._backend.scan(self.begin_time, table, chunk)
         }
@@ -281,7 +321,7 @@ class Transaction:
 
     def _insertable(self, table: str, chunk: ChunkId) -> TableDescriptor:
         """The table's descriptor, once the transaction is open and `chunk` is `table`'s."""
-        self._check_open()
+        self._writing()
         descriptor = self._backend.table(table)
         if self._backend.chunk_table(chunk) != table:
             raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
@@ -315,7 +355,7 @@ class Transaction:
 
     def update(self, table: str, item_id: ItemId, message: Message) -> None:
         """Buffer a new version of an existing item."""
-        self._check_open()
+        self._writing()
         data = self._backend.table(table).encode(message)
         chunk = self._current_chunk(table, item_id)
         self._saw(item_id)
@@ -325,7 +365,7 @@ class Transaction:
 
     def remove(self, table: str, item_id: ItemId) -> None:
         """Buffer the removal of an item (a tombstone revision at commit)."""
-        self._check_open()
+        self._writing()
         chunk = self._current_chunk(table, item_id)
         self._saw(item_id)
         previous = self._changes.get(item_id)
@@ -336,7 +376,7 @@ class Transaction:
 
     def stage(self, change: Change) -> None:
         """Buffer a prepared change as is (used to re-apply our side of a conflict)."""
-        self._check_open()
+        self._writing()
         self._backend.table(change.table)
         if change.op is not Op.INSERT:
             self._saw(change.item_id)
@@ -344,7 +384,7 @@ class Transaction:
 
     def unstage(self, item_id: ItemId) -> None:
         """Drop the buffered change of one item."""
-        self._check_open()
+        self._writing()
         self._changes.pop(item_id, None)
 
     # -- commit ----------------------------------------------------------------
@@ -378,6 +418,7 @@ class Transaction:
         for revision in revisions:
             self._own[revision.item_id] = revision
         self._changes.clear()
+        self._fresh = False
 
     def abort(self) -> None:
         """Drop the buffered changes; the transaction cannot be used again."""

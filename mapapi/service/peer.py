@@ -1,8 +1,8 @@
 """`Peer`: the async public facade; composes the store, clock, commit path and swarm.
 
 A peer works alone on its repository until `start()` puts it on the network
-(`Swarm`); from then on every commit goes through the distributed lock and
-reaches every holder. It holds no protocol logic of its own and delegates to
+(`Swarm`); from then on every commit goes through the Raft logs of the
+chunks it writes (DESIGN §13). It holds no protocol logic of its own and delegates to
 `commit`, `transaction`, `swarm` (reads in `reading`, queries by place in
 `placed`) and the store.
 """
@@ -315,19 +315,26 @@ class Peer:
 
         Alone, the newest commit time applied to the store (other processes may
         commit to it too). In a swarm, the Lamport clock, which every message
-        advances: a view then includes every commit this peer has heard of, and
-        reads of a chunk wait while a writer holds it, so no commit at or
-        before that time can still arrive (DESIGN §5).
+        advances: a view then includes every commit this peer has heard of; its
+        first read of a chunk catches the replica up and closes the chunk's log at
+        the view's time (`Swarm.read_at`), so no commit at or before it can still
+        arrive (DESIGN §13).
         """
         self.clock.advance_to(self.store.clock())
         return self.clock.now() if self.swarm is not None else self.store.clock()
 
     def begin(self, at: int | None = None, *, isolation: Isolation = "snapshot") -> Transaction:
-        """A transaction reading the map as of now (or of logical time `at`)."""
+        """A transaction reading the map as of now (or of logical time `at`).
+
+        Begun now in a swarm, its first read catches up the chunks it reads and
+        moves its time to their newest commit if that is later (`catch_up`), so it
+        sees every commit acknowledged before that read, on any peer."""
         now = self.now()
         if at is not None and not 0 <= at <= now:
             raise UsageError(f"time {at} is outside 0..{now} (the newest commit time)")
-        return Transaction(self, now if at is None else at, self.id, isolation=isolation)
+        if at is not None:
+            return Transaction(self, at, self.id, isolation=isolation)
+        return Transaction(self, now, self.id, isolation=isolation, fresh=True)
 
     def read_local(self, item_id: ItemId, time: int) -> Revision | None:
         """The newest local revision of an item at or before `time`."""
@@ -342,6 +349,23 @@ class Peer:
         """Items visible at `time` in a table or chunk; a chunk not held here is
         fetched first (`mapapi.swarm.reading.scan`)."""
         return await reading.scan(self.store, self.swarm, time, table, chunk)
+
+    async def catch_up(
+        self,
+        time: int,
+        *,
+        item: ItemId | None = None,
+        table: str = "",
+        chunk: ChunkId | None = None,
+    ) -> int:
+        """The time a view begun now (at `time`) reads at once its first read
+        (of `item`, or of `chunk`, or of `table`) caught up the chunks it touches
+        (`mapapi.swarm.reading.latest`); alone, `time`."""
+        moved = await reading.latest(
+            self.store, self.swarm, time, item=item, table=table, chunk=chunk
+        )
+        self.clock.advance_to(moved)
+        return moved
 
     async def scan_labelled(
         self, time: int, labels: Labels, label: str, table: str

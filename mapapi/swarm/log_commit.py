@@ -198,19 +198,25 @@ class LogCommits:
             ChunkBusy: a multi-chunk transaction held the chunk too long.
             RequestTimeout: the leader could not confirm in time.
         """
-        await self._caught_up(chunk, timeout)
-        if self.groups.store.raft_time(chunk) >= time:
+        if await self.caught_up(chunk, timeout) >= time:
             return
         await self.propose(chunk, TimeFloor(time), timeout)
-        await self._caught_up(chunk, timeout)  # the floor applied here too
+        await self.caught_up(chunk, timeout)  # the floor applied here too
 
-    async def _caught_up(self, chunk: ChunkId, timeout: float) -> None:  # noqa: ASYNC109
-        """`RaftGroups.catch_up`, asking again while an election runs."""
+    async def caught_up(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
+        """Catch this replica of `chunk` up with its leader (`RaftGroups.catch_up`,
+        asking again while an election runs); returns the chunk's clock then: no
+        commit applied later is stamped at or before it.
+
+        Raises:
+            NotChunkLeader: no leader was known in time.
+            RequestTimeout: the leader could not confirm in time.
+        """
         deadline = asyncio.get_running_loop().time() + timeout
         while True:
             try:
                 await self.groups.catch_up(chunk, timeout)
-                return
+                return self.groups.store.raft_time(chunk)
             except NotChunkLeader:
                 if asyncio.get_running_loop().time() + MAX_RETRY_PAUSE > deadline:
                     raise

@@ -179,6 +179,21 @@ class Swarm:
         await self.log.read_at(chunk, time)
         self._closed[chunk] = max(self._closed.get(chunk, -1), time)
 
+    async def caught_up(self, chunk: ChunkId) -> int:
+        """Catch this replica of `chunk` up with its leader, as a view begun now
+        needs to see every commit acknowledged before (ReadIndex); returns the
+        chunk's clock then, up to which its reads are final.
+
+        Raises:
+            NotChunkLeader: no leader was known in time.
+            RequestTimeout: the leader could not confirm in time.
+        """
+        if not self.replicator.holds(chunk):
+            return self._store.raft_time(chunk)
+        time = await self.log.caught_up(chunk)
+        self._closed[chunk] = max(self._closed.get(chunk, -1), time)
+        return time
+
     def ensure_group(self, chunk: ChunkId) -> None:
         """Found a group of one for a chunk this peer holds alone and that has none
         (created here, or held since before it ran on the network)."""

@@ -29,17 +29,9 @@ async def read(
 ) -> Revision | None:
     """The item at `time`; in a swarm, an item of a chunk not held here is
     fetched first (its chunk is found by asking the members)."""
-    revision = store.read(item_id, time)
     if swarm is None:
-        return revision
-    if revision is None and store.item_chunk(item_id) is None:
-        try:
-            found = await swarm.replicator.find_holders(item=item_id)
-        except ChunkNotFound:
-            return None
-        if found.chunk is not None:
-            await swarm.replicator.participate(found.chunk)
-    chunk = store.item_chunk(item_id)
+        return store.read(item_id, time)
+    chunk = await _item_chunk(store, swarm, item_id)
     if chunk is not None:
         await swarm.read_at(chunk, time)
     return store.read(item_id, time)
@@ -51,12 +43,65 @@ async def scan(
     """Items visible at `time` in a table or chunk; a chunk not held here is
     fetched first."""
     if swarm is not None:
-        if chunk is not None and chunk not in {c.id for c in store.chunks()}:
-            await swarm.replicator.participate(chunk)
-        chunks = [chunk] if chunk is not None else [c.id for c in store.chunks(table)]
-        for each in chunks:
+        for each in await _scope_chunks(store, swarm, table, chunk):
             await swarm.read_at(each, time)
     return store.scan(time, table=table, chunk=chunk)
+
+
+async def latest(
+    store: ReplicaStore,
+    swarm: Swarm | None,
+    time: int,
+    *,
+    item: ItemId | None = None,
+    table: str = "",
+    chunk: ChunkId | None = None,
+) -> int:
+    """The time a view begun at `time` that has read nothing yet reads at from
+    now on: the chunks its first read touches (`item`'s, else `chunk`, else
+    every chunk of `table`; fetched first if not held here) are caught up with
+    their leaders, and if they applied commits stamped past `time`, the view
+    moves to the newest of them. That is the same as having begun once they
+    were up to date, and it is how a view sees a commit acknowledged on another
+    peer a moment ago, whatever the two peers' Lamport clocks (DESIGN §13,
+    docs/design.md "Views"). Alone, `time`."""
+    if swarm is None:
+        return time
+    if item is not None:
+        held = await _item_chunk(store, swarm, item)
+        chunks = [] if held is None else [held]
+    else:
+        chunks = await _scope_chunks(store, swarm, table, chunk)
+    for each in chunks:
+        time = max(time, await swarm.caught_up(each))
+    return time
+
+
+async def _item_chunk(store: ReplicaStore, swarm: Swarm, item_id: ItemId) -> ChunkId | None:
+    """The chunk of an item, fetched first if this peer holds no replica of it
+    (found by asking the members); None if no one holds it."""
+    chunk = store.item_chunk(item_id)
+    if chunk is not None:
+        return chunk
+    try:
+        found = await swarm.replicator.find_holders(item=item_id)
+    except ChunkNotFound:
+        return None
+    if found.chunk is not None:
+        await swarm.replicator.participate(found.chunk)
+    return store.item_chunk(item_id)
+
+
+async def _scope_chunks(
+    store: ReplicaStore, swarm: Swarm, table: str, chunk: ChunkId | None
+) -> list[ChunkId]:
+    """The chunks a scan of `table` (or of its `chunk`) reads; a chunk not held
+    here is fetched first."""
+    if chunk is None:
+        return [c.id for c in store.chunks(table)]
+    if chunk not in {c.id for c in store.chunks()}:
+        await swarm.replicator.participate(chunk)
+    return [chunk]
 
 
 async def scan_labelled(

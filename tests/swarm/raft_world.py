@@ -168,5 +168,15 @@ class Writer(Ledger):
     async def scan(self, time: int, table: str, chunk: ChunkId | None) -> list[Revision]:
         return self.store.scan(time, table, chunk)
 
+    async def catch_up(
+        self,
+        time: int,
+        *,
+        item: ItemId | None = None,
+        table: str = "",
+        chunk: ChunkId | None = None,
+    ) -> int:
+        return time
+
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         return (await self.commits.commit(tx, message)).record
