@@ -5,14 +5,48 @@ Every commit applied from a chunk's log left a link (`core/chain.py`).
 stored now: a payload changed on disk, a commit gone (a rolled-back file), a
 link that does not follow from the one before, or a commit of the chunk with no
 link (written into the file behind the store's back) is reported, never
-repaired silently. Holders compare their heads with `chain_watch.ChainWatch`.
+repaired silently. Holders compare their heads with `chain_watch.ChainWatch`,
+and a chunk's leader takes in no new holder while its replica no longer matches
+its chain (`refuse_to_hand_on`).
 """
 
 from __future__ import annotations
 
+import asyncio
+import logging
+
 from mapapi.core import chain
-from mapapi.core.ids import ChunkId
+from mapapi.core.errors import CorruptRepoError
+from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
+
+log = logging.getLogger(__name__)
+
+
+async def refuse_to_hand_on(store: ReplicaStore, chunk: ChunkId, me: PeerId) -> None:
+    """Refuse to take a new holder of `chunk` in while this replica's history no
+    longer matches its hash chain: the newcomer receives this replica's state (a
+    snapshot) or its log, and rebuilds the chain from the history it receives, so
+    what it gets must be what the chain says (issue 18 §3). The chain is rebuilt
+    off the event loop.
+
+    Raises:
+        CorruptRepoError: it does not (logged here; the newcomer asks another holder).
+    """
+    commits = {c.id: c for c in store.chunk_commits(chunk)}
+    revisions = store.chunk_revisions(chunk)
+    try:
+        rebuilt = await asyncio.to_thread(chain.rebuild, chunk, commits, revisions)
+    except KeyError:  # a revision whose commit record is gone
+        rebuilt = None
+    if rebuilt == store.chain_links(chunk):
+        return
+    problem = (
+        f"chunk {chunk.short}: the history of this replica no longer matches its hash "
+        f"chain, so it is not sent to another peer; run `mapctl fsck` on peer {me.short}"
+    )
+    log.error("%s", problem)
+    raise CorruptRepoError(problem)
 
 
 def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:

@@ -17,10 +17,11 @@ import asyncio
 import logging
 from collections.abc import Callable, Iterable
 
-from mapapi.core.errors import NotChunkLeader, RequestTimeout
+from mapapi.core.errors import CorruptRepoError, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
 from mapapi.net.rpc import Request, Rpc
+from mapapi.swarm.chain_check import refuse_to_hand_on
 from mapapi.swarm.group_state import AddressFn
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.raft_types import ConfChange, ConfChangeKind, Config, ProposalRefused
@@ -107,15 +108,22 @@ class GroupMembers:
         Raises:
             RequestTimeout: the change, or the state, did not arrive in time (this
                 peer stays in the group: its state may still arrive).
+            CorruptRepoError: the leader's replica no longer matches its hash chain
+                (it hands it on to no one; this peer is not taken in).
             NetworkError: `via` could not be reached.
         """
-        if self.groups.store.raft_load(chunk) is None:
+        joined = self.groups.store.raft_load(chunk) is None
+        if joined:
             self.groups.join(chunk)
         try:
             async with asyncio.timeout(timeout):
                 changed = await self._ask(via, GroupJoin(chunk))
                 while self.groups.applied(chunk) < changed.index:
                     await self.groups.progressed(chunk)
+        except CorruptRepoError:
+            if joined:  # refused outright: not taken in
+                self.groups.drop(chunk)
+            raise
         except TimeoutError:
             # The leader may have taken us in already: a member keeps its log (it
             # must not come back empty), and its state arrives later.
@@ -172,6 +180,8 @@ class GroupMembers:
         groups = self.groups
         if not groups.is_leader(chunk):
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
+        if add is not None and add not in groups.members(chunk):
+            await refuse_to_hand_on(groups.store, chunk, groups.me)
         # One change of a chunk's members at a time, each from the members then: two
         # joins computed side by side would each take the other out again.
         async with self._changing.setdefault(chunk, asyncio.Lock()):

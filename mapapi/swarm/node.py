@@ -387,9 +387,12 @@ class Swarm:
 
     async def rejoin(self) -> list[ChunkId]:
         """The chunks this peer shares with others: their groups resumed at `start`
-        and catch up by themselves; their chains are compared with the other
+        and catch up by themselves; this peer is registered again as their holder
+        in the lookup index, and their chains are compared with the other
         holders' at once. Returns them."""
         back = self.replicator.shared()
+        for chunk in back:
+            await self.replicator.register(chunk)
         await self.chains.compare(back)
         return back
 

@@ -127,7 +127,7 @@ async def test_a_replica_that_no_longer_matches_its_chain_is_not_sent(
     con.commit()
     con.close()
     with (
-        caplog.at_level(logging.ERROR, logger="mapapi.swarm.replication"),
+        caplog.at_level(logging.ERROR, logger="mapapi.swarm.chain_check"),
         pytest.raises(CorruptRepoError, match="no longer matches its hash chain"),
     ):
         await b.participate(chunk)

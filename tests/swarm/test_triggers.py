@@ -10,7 +10,7 @@ import threading
 from mapapi import ConflictError, ItemId, NetworkError, Peer
 from mapapi.swarm.triggers import CommitEvent
 
-from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, log_ids, share, value
+from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, log_ids, net, share, value
 
 LIMIT = 10
 
@@ -21,6 +21,20 @@ async def quiet(*peers: Peer) -> None:
         for peer in peers:
             await peer.triggers.drained()
         if all(peer.triggers.idle for peer in peers):
+            return
+
+
+async def settled(*peers: Peer) -> None:
+    """Wait until every peer applied every commit of its chunks' logs and ran the
+    triggers they fired (a commit returns once a majority of the chunk's voters
+    took it: a learner applies it, and fires its triggers, a moment later)."""
+    while True:
+        await quiet(*peers)
+        before = [net(p).groups.applied(c.id) for p in peers for c in p.chunks()]
+        for peer in peers:
+            await log_ids(peer)  # caught up with the chunks' leaders
+        await quiet(*peers)
+        if [net(p).groups.applied(c.id) for p in peers for c in p.chunks()] == before:
             return
 
 
@@ -57,7 +71,7 @@ async def test_ping_pong_ends_at_exactly_ten(swarm: MakeSwarm) -> None:
     tx = a.begin()
     tx.update(TABLE, item, Counter(name="c", value=0))
     await tx.commit("serve")
-    await quiet(a, b)
+    await settled(a, b)
 
     assert await value(a, item) == LIMIT
     assert await value(b, item) == LIMIT
@@ -84,9 +98,10 @@ async def test_a_trigger_sees_each_commit_once_in_order_with_its_changes(
     tx.update(TABLE, first, Counter(name="c", value=5))
     await tx.commit("insert and update")
     tx = b.begin()
+    assert await tx.get(TABLE, second) is not None  # b's replica caught up with a's commit
     tx.remove(TABLE, second)
     await tx.commit("b removes d")
-    await quiet(a, b)
+    await settled(a, b)
 
     assert [e.record.message for e in seen] == ["insert and update", "b removes d"]
     assert (seen[0].inserted, seen[0].updated, seen[0].removed) == ((second,), (first,), ())
@@ -128,7 +143,7 @@ async def test_a_failing_trigger_is_logged_and_the_peer_goes_on(
         tx = a.begin()
         tx.update(TABLE, item, Counter(name="c", value=n))
         await tx.commit(f"set {n}")
-    await quiet(a, b)
+    await settled(a, b)
 
     assert after == ["set 1", "set 2"]
     assert await value(b, item) == 2
