@@ -201,9 +201,7 @@ class TxSim:
             elif outcome.busy:
                 answer(Answer(busy="the chunk stayed busy"))
             else:
-                answer(
-                    Answer(outcome.prepared, outcome.conflicts, outcome.refusal, outcome.decision)
-                )
+                answer(Answer(outcome.prepared, outcome.conflicts, outcome.decision))
 
         self.propose(n, chunk, entry, heard)
 
@@ -275,7 +273,7 @@ class TxSim:
         self.running -= 1
         if answer.unknown:
             txn.status = "unknown"
-        elif answer.decision is None and not (answer.conflicts or answer.busy or answer.refusal):
+        elif answer.decision is None and not (answer.conflicts or answer.busy):
             txn.status = "acked"
         else:
             txn.status = "aborted"

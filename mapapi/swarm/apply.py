@@ -2,12 +2,14 @@
 
 A committed log entry carries a `Proposal`; every holder decides it here, in log
 order, on its own replica of the chunk. The decision depends only on the
-replica (identical on every holder at the same log index) and the proposal, so
-all holders decide alike without talking: validation is the same pure
-`validate` as a lone peer's commit, with no auto-merge hook (merge policies are
-Python objects of one peer; the writer merges and proposes again), and the
-commit rules the application gave at construction (every holder runs the same
-application).
+replica of the chunk (identical on every holder at the same log index) and the
+proposal, so all holders decide alike without talking: validation is the same
+pure `validate` as a lone peer's commit, with no auto-merge hook (merge policies
+are Python objects of one peer; the writer merges and proposes again). The
+application's commit rules are not checked here: they read other chunks too
+(an edge's ends are vertices of another table), which a holder of this one need
+not hold, so the writer checks them over the whole transaction
+(`swarm/log_commit.py`).
 
 Each commit extends the chunk's hash chain (`core/chain.py`) in the same
 transaction (`Store.apply_commit` links every commit, whichever path applies
@@ -25,7 +27,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.proposal import Proposal, TxDecision
@@ -33,21 +34,19 @@ from mapapi.core.transaction import Change, Conflict
 from mapapi.core.validate import build_revisions, validate
 from mapapi.core.view import Scope
 from mapapi.store.base import ReplicaStore, Store
-from mapapi.swarm.commit_check import CommitRule
 
 
 @dataclass(frozen=True, slots=True)
 class Outcome:
     """How a holder decided a log entry, the same on every holder: committed
-    (`record`), conflicting (`conflicts`), refused by a rule (`refusal`), held
-    back because another transaction is prepared on the chunk (`busy`), a
+    (`record`), conflicting (`conflicts`), held back because another transaction
+    is prepared on the chunk (`busy`), a
     prepare that holds (`prepared`: the time it reserved), or the decision the
     chunk keeps for a multi-chunk transaction (`decision`, `swarm/apply_tx.py`)."""
 
     record: CommitRecord | None = None
     revisions: tuple[Revision, ...] = ()
     conflicts: tuple[Conflict, ...] = ()
-    refusal: str = ""
     busy: bool = False
     prepared: int = 0
     decision: TxDecision | None = None
@@ -58,12 +57,7 @@ class Outcome:
         return self.record is not None
 
 
-def apply_proposal(
-    store: ReplicaStore,
-    chunk: ChunkId,
-    proposal: Proposal,
-    rules: Sequence[CommitRule] = (),
-) -> Outcome:
+def apply_proposal(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome:
     """Decide `proposal` on this replica of `chunk` and write it if it holds.
 
     Call inside `store.exclusive()`, with the entry's applied index recorded in
@@ -71,7 +65,7 @@ def apply_proposal(
     The chunk's clock (`Store.raft_time`) is the caller's to advance to
     `Outcome.record.time`.
     """
-    held = decide(store, chunk, proposal, rules)
+    held = decide(store, chunk, proposal)
     if isinstance(held, Outcome):
         return held
     record = CommitRecord(
@@ -99,16 +93,10 @@ class Held:
     time: int
 
 
-def decide(
-    store: ReplicaStore,
-    chunk: ChunkId,
-    proposal: Proposal,
-    rules: Sequence[CommitRule] = (),
-) -> Outcome | Held:
+def decide(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome | Held:
     """Validate `proposal` on this replica of `chunk`: `Held` if it holds and
     writes something, else the `Outcome` to answer (busy: another transaction is
-    prepared on the chunk, `swarm/apply_tx.py`; conflicts; a rule's refusal;
-    nothing to write)."""
+    prepared on the chunk, `swarm/apply_tx.py`; conflicts; nothing to write)."""
     if any(cid != proposal.commit_id for cid, _ in store.raft_tx_prepared(chunk)):
         return Outcome(busy=True)
     # Only this chunk's part of the reads and scans: a holder may hold other chunks
@@ -126,11 +114,6 @@ def decide(
     )
     if conflicts:
         return Outcome(conflicts=tuple(conflicts))
-    try:
-        for rule in rules:
-            rule.check(store, accepted)
-    except UsageError as exc:
-        return Outcome(refusal=str(exc))
     if not accepted:
         return Outcome()
     return Held(accepted, latest, max(proposal.time, chunk_clock(store, chunk) + 1))

@@ -21,7 +21,6 @@ holds the transaction's one decision, and the others follow it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import replace
 
 from mapapi.core import codec
@@ -31,14 +30,13 @@ from mapapi.core.proposal import Proposal, TimeFloor, TxDecision
 from mapapi.core.validate import build_revisions
 from mapapi.store.base import ReplicaStore, TxRow
 from mapapi.swarm.apply import Outcome, apply_proposal, decide, write_commit
-from mapapi.swarm.commit_check import CommitRule
 from mapapi.swarm.group_state import Applied, ApplyFn
 from mapapi.swarm.raft_types import Entry
 
 PREPARED, COMMITTED, ABORTED = "prepared", "committed", "aborted"
 
 
-def applier(store: ReplicaStore, rules: Sequence[CommitRule] = ()) -> ApplyFn:
+def applier(store: ReplicaStore) -> ApplyFn:
     """The `RaftGroups` apply hook of a peer: each committed entry is a proposal
     (`apply_proposal`), a prepare or a decision (below), decided and written on
     this replica, or a readers' floor that moves the chunk's clock; its `Outcome`
@@ -54,20 +52,15 @@ def applier(store: ReplicaStore, rules: Sequence[CommitRule] = ()) -> ApplyFn:
         if isinstance(carried, TxDecision):
             outcome = apply_decision(store, chunk, carried)
         elif carried.is_prepare:
-            outcome = apply_prepare(store, chunk, carried, rules)
+            outcome = apply_prepare(store, chunk, carried)
         else:
-            outcome = apply_proposal(store, chunk, carried, rules)
+            outcome = apply_proposal(store, chunk, carried)
         return Applied(outcome, outcome.record.time if outcome.record else 0)
 
     return apply_entry
 
 
-def apply_prepare(
-    store: ReplicaStore,
-    chunk: ChunkId,
-    proposal: Proposal,
-    rules: Sequence[CommitRule] = (),
-) -> Outcome:
+def apply_prepare(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome:
     """Decide one chunk's prepare of a multi-chunk transaction (see the module
     docstring); inside `store.exclusive()`, with the applied index."""
     kept = store.raft_tx(chunk, proposal.commit_id)
@@ -75,7 +68,7 @@ def apply_prepare(
         if kept.state == PREPARED:
             return Outcome(prepared=kept.time)
         return _recorded(proposal.commit_id, kept)
-    held = decide(store, chunk, proposal, rules)
+    held = decide(store, chunk, proposal)
     if isinstance(held, Outcome):
         return held
     waiting = replace(proposal, changes=tuple(held.changes))

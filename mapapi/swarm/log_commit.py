@@ -4,7 +4,8 @@ The writer turns its transaction into a `Proposal` for the chunk and hands it to
 the chunk's leader: itself, or the leader its group names, over the swarm port
 (`RaftPropose`). The leader appends it, and once the entry applies there (every
 holder decides it alike, `swarm/apply.py`) answers with the commit, or with the
-conflicts as a `ConflictError`, or a rule's refusal as a `UsageError`. The
+conflicts as a `ConflictError`. The application's commit rules are checked
+here, over the whole transaction, before it is proposed. The
 writer's transaction then knows its commit, or can be merged and tried again.
 
 A transaction that writes several chunks commits in two phases across their
@@ -15,8 +16,9 @@ logs: `swarm/two_phase.py` decides what to propose, this module proposes it
 from __future__ import annotations
 
 import asyncio
+import logging
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from mapapi.core import codec
@@ -28,7 +30,6 @@ from mapapi.core.errors import (
     MapError,
     NotChunkLeader,
     ProposalLost,
-    UsageError,
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
@@ -37,8 +38,11 @@ from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.apply import Outcome
+from mapapi.swarm.commit_check import CommitRule
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.two_phase import Answer, TwoPhase
+
+log = logging.getLogger(__name__)
 
 RETRY_PAUSE = 0.01
 """Seconds before a proposal is made again after "busy" or "no leader" (doubling)."""
@@ -61,6 +65,10 @@ class LogCommits:
         rpc: the swarm's Rpc; serves `RaftPropose` for writers elsewhere.
         address: where a peer is reached now (the member list).
         clock: this peer's Lamport clock (a proposal's time; merged with the commit's).
+        rules: the application's commit rules, checked here over the whole
+            transaction before it is proposed (they may read other chunks than the
+            ones written, which holders of one chunk need not hold: a holder's
+            decision depends on its replica of the chunk alone).
     """
 
     def __init__(
@@ -69,11 +77,13 @@ class LogCommits:
         rpc: Rpc,
         address: Callable[[PeerId], str],
         clock: LamportClock,
+        rules: Sequence[CommitRule] = (),
     ) -> None:
         self.groups = groups
         self.rpc = rpc
         self._address = address
         self.clock = clock
+        self.rules = tuple(rules)
         rpc.register(RaftPropose, self.rpc_raft_propose)
 
     async def commit(self, tx: Transaction, message: str) -> Committed:
@@ -92,12 +102,14 @@ class LogCommits:
             NetworkError: a leader could not be reached.
         """
         chunks = tuple(sorted({c.chunk_id for c in tx.changes}))
+        for rule in self.rules:  # over the whole transaction, on this peer's replicas
+            rule.check(self.groups.store, tx.changes)
         if len(chunks) < 2:
             chunk = chunks[0] if chunks else None
             if chunk is None:
                 return Committed(None, ())
             outcome = await self.propose(chunk, Proposal.of(tx, chunk, message, self.clock.tick()))
-            return self._done(tx, self._raise_failure(chunk, outcome, tx))
+            return await self._done(tx, self._raise_failure(chunk, outcome, tx))
         time, commit_id = self.clock.tick(), CommitId.new()
         machine = TwoPhase(
             {c: Proposal.of(tx, c, message, time, chunks, commit_id) for c in chunks}
@@ -106,7 +118,7 @@ class LogCommits:
         if machine.committed:
             revisions = tuple(r for o in outcomes for r in o.revisions)
             record = next((o.record for o in outcomes if o.record is not None), None)
-            return self._done(tx, Outcome(record, revisions))
+            return await self._done(tx, Outcome(record, revisions))
         if machine.uncertain and machine.decision is None:
             raise CommitUncertain(
                 f"commit {commit_id.short} over {len(chunks)} chunks: {machine.uncertain}; "
@@ -114,17 +126,35 @@ class LogCommits:
             )
         if machine.conflicts:
             raise ConflictError(list(machine.conflicts), tx, self.groups.store.raft_time(chunks[0]))
-        if machine.refusal:
-            raise UsageError(machine.refusal)
         if machine.busy:
             raise ChunkBusy(machine.busy)
         raise ProposalLost(f"commit {commit_id.short} was aborted: {machine.failed}; retry")
 
-    def _done(self, tx: Transaction, outcome: Outcome) -> Committed:
+    async def _done(self, tx: Transaction, outcome: Outcome) -> Committed:
         if outcome.record is not None:
             self.clock.advance_to(outcome.record.time)
+            await self._applied_here(outcome.record)
         tx.committed(list(outcome.revisions))
         return Committed(outcome.record, outcome.revisions)
+
+    async def _applied_here(self, record: CommitRecord) -> None:
+        """Wait until this peer's replicas of the commit's chunks applied it, so the
+        writer reads its own writes (its store, its log, its next commit's rules):
+        the leader answered once it applied the entry, and a follower applies it at
+        the next append. A replica that stays behind (cut off from its leader right
+        after) is left to catch up by itself after `PROPOSE_TIMEOUT`."""
+        store = self.groups.store
+        try:
+            async with asyncio.timeout(PROPOSE_TIMEOUT):
+                for chunk in record.chunks:
+                    held = store.raft_load(chunk) is not None
+                    while held and store.raft_time(chunk) < record.time:
+                        await self.groups.progressed(chunk)
+        except TimeoutError:
+            log.warning(
+                "commit %s: this replica has not applied it yet; it catches up by itself",
+                record.id.short,
+            )
 
     async def _run(self, machine: TwoPhase) -> list[Outcome]:
         """Drive a two-phase commit to its end; the outcomes of its decisions."""
@@ -148,7 +178,7 @@ class LogCommits:
             return chunk, Answer(busy=str(exc)), None
         except MapError as exc:
             return chunk, Answer(unknown=f"chunk {chunk.short}: {exc}"), None
-        answer = Answer(outcome.prepared, outcome.conflicts, outcome.refusal, outcome.decision)
+        answer = Answer(outcome.prepared, outcome.conflicts, outcome.decision)
         return chunk, answer, outcome
 
     async def propose(
@@ -234,8 +264,6 @@ class LogCommits:
             answer = await self.call_raft_propose(leader, chunk, data)
         except ConflictError as exc:
             return Outcome(conflicts=tuple(exc.conflicts))
-        except UsageError as exc:
-            return Outcome(refusal=str(exc))
         decision = None
         if answer.decided and not isinstance(entry, TimeFloor):
             decision = TxDecision(entry.commit_id, answer.commit, answer.time)
@@ -251,11 +279,9 @@ class LogCommits:
         self, chunk: ChunkId, outcome: Outcome, tx: Transaction | None = None
     ) -> Outcome:
         """`outcome`, unless it is a failure: then its error (a conflict mergeable
-        into `tx`, or a rule's refusal)."""
+        into `tx`)."""
         if outcome.conflicts:
             raise ConflictError(list(outcome.conflicts), tx, self.groups.store.raft_time(chunk))
-        if outcome.refusal:
-            raise UsageError(outcome.refusal)
         return outcome
 
     async def call_raft_propose(self, leader: PeerId, chunk: ChunkId, data: bytes) -> RaftProposed:
@@ -270,7 +296,7 @@ class LogCommits:
 
         Raises:
             NotChunkLeader: this peer does not lead the chunk (the writer asks again).
-            ConflictError, UsageError: how the holders decided a proposal.
+            ConflictError: how the holders decided a proposal.
         """
         body: RaftPropose = req.body
         if not self.groups.is_leader(body.chunk):

@@ -123,10 +123,10 @@ class Swarm:
             states=StoreStates(store),
             on_members=store.set_holders,
         )
-        self.log = LogCommits(self.groups, self.rpc, self.members.address, clock)
+        self.log = LogCommits(self.groups, self.rpc, self.members.address, clock, self._rules)
         self.tx_recovery = TxRecovery(self.log)
         self.group_members = GroupMembers(self.groups, self.rpc, self.members.address)
-        self._decide = applier(store, self._rules)
+        self._decide = applier(store)
         self._closed: dict[ChunkId, int] = {}  # chunk -> the time up to which reads are final
         self.replicator = Replicator(
             self.rpc,

@@ -8,7 +8,7 @@ and feed back how each entry was decided.
    holds reserves its chunk (`swarm/apply_tx.py`), and taking chunks in one
    order means two transactions never wait for each other in a circle.
 2. All prepared: decide commit, at the largest time they reserved, in the first
-   chunk's log. A conflict, a refusal, or a prepare whose fate is unknown:
+   chunk's log. A conflict, or a prepare whose fate is unknown:
    decide abort there instead (an unknown prepare may have landed).
 3. The first chunk's log answers with the decision it keeps (a recovering peer
    may have aborted the transaction first); that decision goes to every other
@@ -47,7 +47,6 @@ class Answer:
 
     prepared: int = 0
     conflicts: tuple[Conflict, ...] = ()
-    refusal: str = ""
     decision: TxDecision | None = None
     busy: str = ""
     unknown: str = ""
@@ -68,7 +67,6 @@ class TwoPhase:
     touched: list[ChunkId] = field(default_factory=list)  # may hold a prepare
     decision: TxDecision | None = None
     conflicts: tuple[Conflict, ...] = ()
-    refusal: str = ""
     busy: str = ""
     failed: str = ""  # a prepare's fate was unknown: aborted, not committed
     uncertain: str = ""  # the first chunk's decision is unknown
@@ -115,7 +113,7 @@ class TwoPhase:
         """Why the transaction did not commit, in a few words ("" if it did or is open)."""
         if self.conflicts:
             return f"{len(self.conflicts)} conflict(s)"
-        return self.refusal or self.busy or self.failed
+        return self.busy or self.failed
 
     def _prepare(self, i: int) -> list[tuple[ChunkId, LogEntry]]:
         chunk = self.order[i]
@@ -129,7 +127,7 @@ class TwoPhase:
             if i < len(self.order):
                 return self._prepare(i)
             return self._decide(TxDecision(self.commit_id, True, max(self.reserved.values())))
-        self.conflicts, self.refusal, self.busy = answer.conflicts, answer.refusal, answer.busy
+        self.conflicts, self.busy = answer.conflicts, answer.busy
         if answer.decision is not None:  # recovery aborted it before this prepare landed
             self.failed = "a peer recovering it aborted the transaction while it prepared"
         if answer.unknown:

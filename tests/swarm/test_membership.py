@@ -10,19 +10,11 @@ import pytest
 import zmq
 import zmq.asyncio
 
-from mapapi import ChunkId, CommitId, CommitRecord, Peer, PeerId
-from mapapi.core.errors import JoinRefused, LockNotHeld, ProtocolError, UsageError
+from mapapi import ChunkId, Peer, PeerId
+from mapapi.core.errors import CorruptRepoError, JoinRefused, NotChunkLeader, ProtocolError
 from mapapi.net import Ping, Pong, codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
-from mapapi.net.messages import (
-    ChunkPart,
-    CommitApply,
-    CommitBatch,
-    Hello,
-    Member,
-    TableInfo,
-    Unlock,
-)
+from mapapi.net.messages import Hello, Member, RaftPropose
 from tests.swarm.conftest import TABLE, MakeSwarm, counter_chunk, increment, log_ids, net, value
 
 
@@ -96,19 +88,10 @@ class TestGarbage:
         for blob in blobs:
             await raw.send(blob)
         await raw.send_multipart([b"three", b"frames", b"here"])
-        record = CommitRecord(CommitId.new(), 10**6, _RAW_PEER, "forged", (chunk,))
-        stranger = Member(_RAW_PEER, "tcp://127.0.0.1:1")
-        wrong = {  # request id -> the error each must get
-            2: (CommitBatch(chunk, 1, record, ()), LockNotHeld),
-            3: (CommitApply(chunk, 7, record.id), LockNotHeld),
-            4: (Unlock(chunk, 9), LockNotHeld),
-            5: (CommitBatch(ChunkId.new(), 1, record, ()), LockNotHeld),
-            6: (ChunkPart(chunk, TableInfo(TABLE, "x.Y"), (), (), (), 3, 2), UsageError),
-            7: (Hello(Member(PeerId.new(), "")), JoinRefused),
-            8: (  # a whole chunk state nobody asked for, naming a stranger the only holder
-                ChunkPart(chunk, TableInfo(TABLE, "mapapi.v1.Counter"), (stranger,), (), (), 0, 1),
-                UsageError,
-            ),
+        wrong = {  # request id -> the error each must get (b is a learner: a leads)
+            2: (RaftPropose(chunk, b"\x01garbage"), NotChunkLeader),
+            3: (RaftPropose(ChunkId.new(), b""), NotChunkLeader),
+            4: (Hello(Member(PeerId.new(), "")), JoinRefused),
         }
         for request_id, (body, _) in wrong.items():
             await raw.send(_request(request_id, body))
@@ -124,6 +107,13 @@ class TestGarbage:
             assert isinstance(reply, ErrorReply)
             assert codec.error_class(reply.code) is error, (request_id, reply)
         broken = [r for i, r in replies.items() if i not in wrong and i != 1000]
+        # the leader refuses a proposal that is no log entry, and goes on
+        leader = raw_dealer(a.address)
+        await leader.send(_request(5, RaftPropose(chunk, b"\x01garbage")))
+        async with asyncio.timeout(5):
+            refused = codec.decode(await leader.recv()).body
+        assert isinstance(refused, ErrorReply)
+        assert codec.error_class(refused.code) is CorruptRepoError
         assert all(isinstance(r, ErrorReply) and r.code == ProtocolError.code for r in broken)
         stats = net(b).rpc.transport.stats
         assert stats.dropped_count("malformed") >= len(blobs)

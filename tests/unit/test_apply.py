@@ -3,24 +3,20 @@
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from mapapi.core import codec
-from mapapi.core.errors import UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Change, Isolation, Op
-from mapapi.store.base import Store
 from mapapi.store.memory import MemoryStore
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, apply_proposal
 from mapapi.swarm.chain_check import check_chain
-from mapapi.swarm.commit_check import CommitRule
 
 CHUNK = ChunkId.new()
 ITEM = ItemId.new()
@@ -41,9 +37,9 @@ def store() -> MemoryStore:
     return made
 
 
-def decide(store: MemoryStore, p: Proposal, rules: Sequence[CommitRule] = ()) -> Outcome:
+def decide(store: MemoryStore, p: Proposal) -> Outcome:
     with store.exclusive():
-        outcome = apply_proposal(store, CHUNK, p, rules)
+        outcome = apply_proposal(store, CHUNK, p)
         if outcome.record is not None:
             store.raft_applied(CHUNK, store.raft_time(CHUNK) + 1, outcome.record.time)
     return outcome
@@ -67,19 +63,6 @@ def test_an_older_proposal_time_is_raised_past_the_chunks_clock(store: MemorySto
     assert late.record is not None
     assert late.record.time == 11
     assert store.latest([ITEM])[ITEM].update_time == 11
-
-
-class Refuse:
-    """A commit rule that refuses everything."""
-
-    def check(self, store: Store, changes: Sequence[Change]) -> None:
-        raise UsageError("refused by the rule")
-
-
-def test_a_refusing_rule_writes_nothing(store: MemoryStore) -> None:
-    outcome = decide(store, proposal(Op.INSERT, b"0", begin=0, time=1), [Refuse()])
-    assert outcome.refusal == "refused by the rule"
-    assert store.latest([ITEM]) == {}
 
 
 def test_a_proposal_survives_the_log_byte_for_byte() -> None:

@@ -68,15 +68,6 @@ def test_a_conflict_on_a_later_chunk_aborts_the_prepared_ones() -> None:
     assert m.aborted_why == "1 conflict(s)"
 
 
-def test_a_refusal_on_the_first_chunk_ends_it_at_once() -> None:
-    m = machine(A, B)
-    m.start()
-    assert m.answered(A, Answer(refusal="the mission rule")) == []
-    assert m.done
-    assert not m.committed
-    assert m.refusal == "the mission rule"
-
-
 def test_a_prepare_of_unknown_fate_is_aborted_even_on_the_first_chunk() -> None:
     m = machine(A, B)
     m.start()
