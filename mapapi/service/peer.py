@@ -277,12 +277,13 @@ class Peer:
 
     async def create_chunk(self, table: str) -> ChunkId:
         """A new, empty chunk of `table`, held by this peer (and, on the network,
-        announced in the lookup index)."""
+        the only member of its Raft group, announced in the lookup index)."""
         self.table(table)
         chunk_id = ChunkId.new()
         self.store.add_chunk(chunk_id, table)
         self.store.set_holders(chunk_id, [self.id])
         if self.swarm is not None:
+            self.swarm.ensure_group(chunk_id)  # others can join it before its first commit
             await self.swarm.replicator.register(chunk_id)
         return chunk_id
 

@@ -1,26 +1,21 @@
-"""A large chunk travels in parts, reported to a progress callback, installed at once."""
+"""A chunk with its history reaches a new holder whole (the group's snapshot and log
+tail), reported to a progress callback; commits replicate over slow links."""
 
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
 
-import pytest
-
 from mapapi import Peer
 from mapapi.app import operations
 from mapapi.net import LinkShape, Shaper
-from mapapi.swarm import replication
 
 from .conftest import TABLE, Counter, MakeSwarm, counter_chunk, increment, net, value
 
 MakePeer = Callable[..., Awaitable[Peer]]
 
 
-class TestChunkInParts:
-    async def test_parts_are_reported_and_everything_arrives(
-        self, swarm: MakeSwarm, monkeypatch: pytest.MonkeyPatch
-    ) -> None:
-        monkeypatch.setattr(replication, "PART_REVISIONS", 3)
+class TestChunkArrives:
+    async def test_progress_is_reported_and_everything_arrives(self, swarm: MakeSwarm) -> None:
         a, b = await swarm(2)
         chunk, _ = await counter_chunk(a)
         tx = a.begin()
@@ -29,7 +24,7 @@ class TestChunkInParts:
         await tx.commit("ten items")
         seen: list[tuple[int, int]] = []
         await b.participate(chunk, lambda done, parts: seen.append((done, parts)))
-        assert seen == [(1, 4), (2, 4), (3, 4), (4, 4)]
+        assert seen == [(1, 1)]
         assert len(await b.begin().items(TABLE, chunk)) == 10
 
     async def test_progress_op_reports_nothing_when_idle(self, swarm: MakeSwarm) -> None:
@@ -53,5 +48,6 @@ class TestShapedLinks:
         await increment(b, [(TABLE, item)])
         assert await value(a, item) == 1
         sent = net(b).rpc.transport.stats.sent_by_type()
-        assert sent["commit_batch"].messages == 1  # b's one commit staged at a, over the slow link
-        assert sent["commit_apply"].messages == 1
+        # to a, the leader: b's commit, after the floor its read may have closed the log with
+        assert sent["raft_propose"].messages in (1, 2)
+        assert sent["raft_batch"].messages > 0  # b takes part in the chunk's group
