@@ -14,8 +14,8 @@ one (it stays outside). S subscribers follow the region in one of the `MODES`:
   it the matching revisions;
 - ``polling``: after each round, each asks the spatial index for the chunks
   overlapping the region and fetches every one with `Peer.participate` (the
-  fetch the API has: the chunk's full state with its history), then leaves
-  it, so that it receives no commit it did not poll for;
+  fetch the API has: the chunk's full state with its history, as its group's
+  snapshot and log), then leaves it, so that it receives no commit it did not poll for;
 - ``replication``: each holds every writer's chunk and receives every commit;
 - ``idle``, the baseline: it does not follow the region, and receives only
   what it serves as a node of the Chord ring while the writers commit (their
@@ -24,8 +24,8 @@ one (it stays outside). S subscribers follow the region in one of the `MODES`:
   ``ring_bytes``.
 
 Freshness is equal: a push is acknowledged before its commit returns, a poll
-runs right after each round's commits, and a holder has applied a commit once
-the chunk is readable again. So after every round each subscriber knows every
+runs right after each round's commits, and a replica is caught up with its
+chunk's leader (ReadIndex) before it is read. So after every round each subscriber knows every
 commit so far, and the bench checks it: the commits a subscriber learned of
 (pushed, or found inside the region in its fetched or replicated history by
 the rule a committer applies, `SubscriptionSpec.matches`) must equal the

@@ -75,7 +75,7 @@ def check_rows(rows: list[dict[str, Any]], fractions: list[float]) -> None:
         assert by_mode["polling"]["query_bytes"] > 0
         assert by_mode["triggers"]["query_bytes"] == 0
         assert "trigger_push" in by_mode["triggers"]["bytes_by_type"]
-        assert "chunk_part" in by_mode["polling"]["bytes_by_type"]
+        assert "raft_batch" in by_mode["polling"]["bytes_by_type"]  # each poll's snapshot
 
 
 class TestWorkload:

@@ -21,7 +21,7 @@ from google.protobuf import struct_pb2
 from mapapi._pb.mapapi.v1 import lookup_pb2
 from mapapi.core import limits
 from mapapi.core.errors import LimitExceeded, ProtocolError, UsageError
-from mapapi.core.history import Revision
+from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.lookup.dht.chord import ChordNode, key_bytes
 from mapapi.lookup.spatial import BBox
@@ -34,10 +34,9 @@ from mapapi.net.messages import (
     ChordEntry,
     ChordFindSuccessor,
     ChordStore,
-    ChunkPart,
     Hello,
     Member,
-    TableInfo,
+    TriggerPush,
     Welcome,
 )
 from mapapi.net.stats import OTHERS, Stats
@@ -100,11 +99,12 @@ class TestDecodedLimits:
     ) -> None:
         monkeypatch.setitem(limits.MAX_BYTES, "data", 1000)  # as if 16 MiB were 1000 bytes
         client, server = await make_rpc(), await make_rpc()
-        server.register(ChunkPart, lambda req: Ack())
+        server.register(TriggerPush, lambda req: Ack())
         revision = _revision(b"x" * 1001)
-        part = ChunkPart(revision.chunk_id, TableInfo("t", "t"), (), (revision,), (), 0, 1)
+        record = CommitRecord(revision.commit_id, 5, revision.author, "", (revision.chunk_id,))
+        push = TriggerPush(b"s", record, (revision,))
         with pytest.raises(ProtocolError, match=r"data: 1001 bytes exceed .*MAX_BYTES\['data'\]"):
-            await client.request(server.address, part)
+            await client.request(server.address, push)
 
 
 class TestLamport:
@@ -220,20 +220,6 @@ class TestPeerState:
             await clients[2].request(peer.swarm.address, Hello(me, index))
         again = Member(clients[0].transport.peer_id, clients[0].address)
         assert len((await clients[0].request(peer.swarm.address, Hello(again, index))).members) == 3
-
-    async def test_a_transfer_of_absurdly_many_parts_is_refused(
-        self, make_rpc: MakeRpc, peer: Peer
-    ) -> None:
-        assert peer.swarm is not None
-        client = await make_rpc()
-        chunk = ChunkId.new()
-        peer.swarm.replicator._wanted[chunk] = 1  # as while participating in it
-        info = TableInfo("t", "google.protobuf.Struct")
-        for part, parts in [(0, 10**9), (0, 0), (5, 5)]:
-            body = ChunkPart(chunk, info, (), (), (), part, parts)
-            with pytest.raises(LimitExceeded, match="MAX_PARTS"):
-                await client.request(peer.swarm.address, body)
-        assert chunk not in peer.swarm.replicator._incoming
 
 
 class TestBoundedState:
