@@ -39,7 +39,8 @@ class Proposal:
     read_set: frozenset[ItemId] = frozenset()
     scopes: frozenset[Scope] = frozenset()
     participants: tuple[ChunkId, ...] = ()
-    """Every chunk a multi-chunk transaction writes, in id order (empty: one chunk)."""
+    """Every chunk of a multi-chunk transaction, in id order (empty: one chunk): those
+    it writes and, under serializable isolation, those whose reads it validates."""
 
     @property
     def is_prepare(self) -> bool:

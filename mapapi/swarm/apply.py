@@ -95,8 +95,10 @@ class Held:
 
 def decide(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome | Held:
     """Validate `proposal` on this replica of `chunk`: `Held` if it holds and
-    writes something, else the `Outcome` to answer (busy: another transaction is
-    prepared on the chunk, `swarm/apply_tx.py`; conflicts; nothing to write)."""
+    writes something (or is a prepare: one that only validates a serializable
+    transaction's reads here holds the chunk too), else the `Outcome` to answer
+    (busy: another transaction is prepared on the chunk, `swarm/apply_tx.py`;
+    conflicts; nothing to write)."""
     if any(cid != proposal.commit_id for cid, _ in store.raft_tx_prepared(chunk)):
         return Outcome(busy=True)
     # Only this chunk's part of the reads and scans: a holder may hold other chunks
@@ -114,7 +116,7 @@ def decide(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome |
     )
     if conflicts:
         return Outcome(conflicts=tuple(conflicts))
-    if not accepted:
+    if not accepted and not proposal.is_prepare:
         return Outcome()
     return Held(accepted, latest, max(proposal.time, chunk_clock(store, chunk) + 1))
 

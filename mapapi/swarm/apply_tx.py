@@ -51,7 +51,12 @@ def applier(store: ReplicaStore) -> ApplyFn:
             return Applied(Outcome(), carried.time)
         if isinstance(carried, TxDecision):
             outcome = apply_decision(store, chunk, carried)
-        elif carried.is_prepare:
+            # A chunk whose prepare only validated reads writes nothing, yet its
+            # clock moves to the decision's time, as a floor would.
+            decided = outcome.decision
+            time = decided.time if decided is not None and decided.commit else 0
+            return Applied(outcome, outcome.record.time if outcome.record else time)
+        if carried.is_prepare:
             outcome = apply_prepare(store, chunk, carried)
         else:
             outcome = apply_proposal(store, chunk, carried)
@@ -94,6 +99,9 @@ def apply_decision(store: ReplicaStore, chunk: ChunkId, decision: TxDecision) ->
     waiting = codec.decode_entry(kept.data)
     assert isinstance(waiting, Proposal)  # apply_prepare wrote it
     time = max(decision.time, kept.time)
+    if not waiting.changes:  # it only validated a serializable transaction's reads here
+        store.raft_tx_put(chunk, decision.commit_id, TxRow(COMMITTED, time))
+        return Outcome(decision=TxDecision(decision.commit_id, True, time))
     record = CommitRecord(
         waiting.commit_id,
         time,

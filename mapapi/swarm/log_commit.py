@@ -101,13 +101,13 @@ class LogCommits:
             CommitUncertain: a multi-chunk commit's decision could not be learnt.
             NetworkError: a leader could not be reached.
         """
-        chunks = tuple(sorted({c.chunk_id for c in tx.changes}))
+        if not tx.changes:
+            return Committed(None, ())
         for rule in self.rules:  # over the whole transaction, on this peer's replicas
             rule.check(self.groups.store, tx.changes)
+        chunks = self._chunks_of(tx)
         if len(chunks) < 2:
-            chunk = chunks[0] if chunks else None
-            if chunk is None:
-                return Committed(None, ())
+            (chunk,) = chunks
             outcome = await self.propose(chunk, Proposal.of(tx, chunk, message, self.clock.tick()))
             return await self._done(tx, self._raise_failure(chunk, outcome, tx))
         time, commit_id = self.clock.tick(), CommitId.new()
@@ -129,6 +129,24 @@ class LogCommits:
         if machine.busy:
             raise ChunkBusy(machine.busy)
         raise ProposalLost(f"commit {commit_id.short} was aborted: {machine.failed}; retry")
+
+    def _chunks_of(self, tx: Transaction) -> tuple[ChunkId, ...]:
+        """The chunks `tx` commits through, in id order: those it writes and, under
+        serializable isolation, those whose items it read or scanned (their
+        prepares validate the reads there and hold the chunk until the decision,
+        so no write lands on what it read in between)."""
+        chunks = {c.chunk_id for c in tx.changes}
+        if tx.isolation == "serializable":
+            store = self.groups.store
+            for item in tx.read_set:
+                read = store.item_chunk(item)
+                if read is not None:
+                    chunks.add(read)
+            for table, scope in tx.scopes:
+                chunks |= {scope} if scope is not None else {c.id for c in store.chunks(table)}
+            chunks = {c for c in chunks if store.raft_load(c) is not None}  # held here
+            chunks |= {c.chunk_id for c in tx.changes}
+        return tuple(sorted(chunks))
 
     async def _done(self, tx: Transaction, outcome: Outcome) -> Committed:
         if outcome.record is not None:

@@ -388,11 +388,15 @@ class Swarm:
     async def rejoin(self) -> list[ChunkId]:
         """The chunks this peer shares with others: their groups resumed at `start`
         and catch up by themselves; this peer is registered again as their holder
-        in the lookup index, and their chains are compared with the other
-        holders' at once. Returns them."""
+        in the lookup index, catches each up with its leader, and compares their
+        chains with the other holders' at once. Returns them."""
         back = self.replicator.shared()
         for chunk in back:
             await self.replicator.register(chunk)
+            try:  # compared once caught up: a replica behind is a prefix of any history
+                await self.caught_up(chunk)
+            except MapError as exc:
+                log.warning("chunk %s has not caught up yet: %s", chunk.short, exc)
         await self.chains.compare(back)
         return back
 

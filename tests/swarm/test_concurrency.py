@@ -153,10 +153,13 @@ async def _open_accounts(
 
 
 async def _balances(peer: Peer, ids: list[ItemId]) -> list[int]:
-    tx = peer.begin()
+    """Each account as a view begun now on `peer` reads it: one view per account,
+    since a view's first read catches its chunk up and moves the view's time to
+    it, while a view that has read stays at its time for the next chunk (where a
+    commit acknowledged a moment ago may be stamped later, by another clock)."""
     out = []
     for item in ids:
-        account = await tx.get(ACCOUNTS, item)
+        account = await peer.begin().get(ACCOUNTS, item)
         assert account is not None
         out.append(int(account.balance))
     return out

@@ -178,3 +178,36 @@ def test_a_floor_waits_while_a_transaction_is_prepared(store: ReplicaStore) -> N
     log(A, p[A])
     assert log(A, TimeFloor(50)).busy
     assert store.raft_time(A) == 0  # the decision's time stays past the clock
+
+
+def test_a_prepare_that_only_validates_reads_holds_the_chunk_and_writes_nothing(
+    store: ReplicaStore,
+) -> None:
+    log = Log(store)
+    log(B, single(write(Y, B, b"y0"), 0, 4))
+    read_only = Proposal(
+        CommitId.new(), 5, AUTHOR, "r", "", "reads Y", 4, "serializable", (),
+        read_set=frozenset({Y}), participants=(A, B),
+    )  # fmt: skip
+    held = log(B, read_only)
+    assert held.prepared == 5
+    assert log(B, single(write(Y, B, b"y1", Op.UPDATE), 4, 6)).busy  # no write on what it read
+    done = log(B, TxDecision(read_only.commit_id, True, 8))
+    assert done.record is None
+    assert done.decision == TxDecision(read_only.commit_id, True, 8)
+    assert store.latest([Y])[Y].data == b"y0"
+    assert store.raft_time(B) == 8  # later writes are stamped past the transaction
+    assert check_chain(store, B) == []
+
+
+def test_a_read_it_validates_that_changed_is_a_conflict(store: ReplicaStore) -> None:
+    log = Log(store)
+    log(B, single(write(Y, B, b"y0"), 0, 4))
+    log(B, single(write(Y, B, b"y1", Op.UPDATE), 4, 6))
+    stale = Proposal(
+        CommitId.new(), 7, AUTHOR, "r", "", "read Y at 4", 4, "serializable", (),
+        read_set=frozenset({Y}), participants=(A, B),
+    )  # fmt: skip
+    refused = log(B, stale)
+    assert [c.item_id for c in refused.conflicts] == [Y]
+    assert not refused.prepared
