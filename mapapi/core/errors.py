@@ -315,6 +315,26 @@ class NotChunkLeader(NetworkError):
         super().__init__(f"this peer does not lead chunk {chunk.short}: {where}")
 
 
+class NoQuorum(NetworkError):
+    """A chunk's group cannot commit (or confirm a read) from here: most of its
+    voters do not answer (DESIGN §13: a minority never commits). Names them."""
+
+    retriable = True
+    code = 56  # 40-49 are taken
+    advice = (
+        "act: bring the voters named back, or reconnect this peer to them (`mapctl peers`); "
+        "the chunk commits again once a majority of its voters is reachable"
+    )
+
+    def __init__(self, chunk: ChunkId, voters: int, down: list[str], why: str) -> None:
+        self.chunk = chunk
+        reachable = voters - len(down)
+        super().__init__(
+            f"no quorum for chunk {chunk.short}: {reachable} of {voters} voters reachable "
+            f"({', '.join(down)} down); {why}"
+        )
+
+
 class ChunkBusy(NetworkError):
     """A chunk stayed held by another transaction's two-phase commit (prepared,
     awaiting its decision) for as long as the writer could wait."""

@@ -20,6 +20,8 @@ from mapapi.core.ids import PeerId
 
 SUSPECT_AFTER = 1.5
 DEAD_AFTER = 3.0
+REMOVE_AFTER = 30.0
+"""Seconds a peer stays declared dead before the leaders of its chunks' groups remove it."""
 
 
 class Health(enum.Enum):

@@ -22,6 +22,7 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.chain_check import refuse_to_hand_on
+from mapapi.swarm.failure import REMOVE_AFTER
 from mapapi.swarm.group_state import AddressFn
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.raft_types import ConfChange, ConfChangeKind, Config, ProposalRefused
@@ -30,8 +31,6 @@ from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
 
-REMOVE_AFTER = 30.0
-"""Seconds a member stays declared dead before its chunks' leaders remove it."""
 ELECTION_PAUSE = 0.05
 """Seconds before asking again a member that knows no leader (an election runs)."""
 
@@ -78,6 +77,8 @@ class GroupMembers:
         rpc: serves and sends `GroupJoin` and `GroupLeave`.
         address: where a peer is reached now.
         factor: the replication factor (voters at most).
+        remove_after: seconds a member stays declared dead before the leader
+            removes it (`reap`).
     """
 
     def __init__(
@@ -86,11 +87,13 @@ class GroupMembers:
         rpc: Rpc,
         address: AddressFn,
         factor: int = DEFAULT_REPLICATION,
+        remove_after: float = REMOVE_AFTER,
     ) -> None:
         self.groups = groups
         self.rpc = rpc
         self._address = address
         self.factor = factor
+        self.remove_after = remove_after
         self._dead_since: dict[PeerId, float] = {}
         self._changing: dict[ChunkId, asyncio.Lock] = {}  # one membership change at a time
         rpc.register(GroupJoin, self.rpc_group_join)
@@ -192,7 +195,7 @@ class GroupMembers:
 
     async def reap(self, is_dead: Callable[[PeerId], bool], now: float) -> list[PeerId]:
         """As the leader of each chunk, remove the members `is_dead` has said are dead
-        for `REMOVE_AFTER` seconds (by `now`, monotonic), and bring the voters back
+        for `remove_after` seconds (by `now`, monotonic), and bring the voters back
         to their odd target (after a leader left, say); returns the ones removed.
 
         A member that comes back before is forgotten from the count.
@@ -203,7 +206,7 @@ class GroupMembers:
             dead = [p for p in members if is_dead(p)]
             for peer in dead:
                 self._dead_since.setdefault(peer, now)
-            gone = [p for p in dead if now - self._dead_since[p] >= REMOVE_AFTER]
+            gone = [p for p in dead if now - self._dead_since[p] >= self.remove_after]
             living = {self.groups.me, *members} - set(gone)
             wanted = {node_id(p) for p in living}
             me = node_id(self.groups.me)

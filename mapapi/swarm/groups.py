@@ -205,6 +205,16 @@ class RaftGroups:
         peers = (self._peer(n) for n in group.node.config.members if n != node_id(self.me))
         return [p for p in peers if p is not None]
 
+    def voters(self, chunk: ChunkId) -> list[PeerId]:
+        """The voters of the chunk's group (this peer too, if it votes) that this
+        peer can name.
+
+        Raises:
+            NotChunkLeader: this peer is not a member of the chunk's group.
+        """
+        voters = (self._peer(n) for n in self._group(chunk).node.config.voters)
+        return [p for p in voters if p is not None]
+
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
         kept = self.store.raft_load(chunk)

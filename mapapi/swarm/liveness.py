@@ -25,7 +25,14 @@ from mapapi.core.ids import PeerId
 from mapapi.net.codec import Ping
 from mapapi.net.rpc import Rpc
 from mapapi.store.base import ReplicaStore
-from mapapi.swarm.failure import DEAD_AFTER, SUSPECT_AFTER, FailureDetector, Health, Transition
+from mapapi.swarm.failure import (
+    DEAD_AFTER,
+    REMOVE_AFTER,
+    SUSPECT_AFTER,
+    FailureDetector,
+    Health,
+    Transition,
+)
 from mapapi.swarm.membership import Members
 
 log = logging.getLogger(__name__)
@@ -38,13 +45,16 @@ class LivenessOptions:
     Attributes:
         interval: how often quiet peers are pinged and health re-evaluated.
         suspect_after: silence before a peer is suspected.
-        dead_after: silence before it is declared dead and evicted from the
-            holder sets of the chunks it shares (when the rest are a quorum).
+        dead_after: silence before it is declared dead: requests to it fail at once.
+        remove_after: how long it stays dead before the leader of each chunk's group
+            it is a member of removes it (a membership change in the chunk's log,
+            `swarm/group_members.py`); a learner is promoted in its place.
     """
 
     interval: float = 0.5
     suspect_after: float = SUSPECT_AFTER
     dead_after: float = DEAD_AFTER
+    remove_after: float = REMOVE_AFTER
 
 
 class LivenessEvents(Protocol):

@@ -28,8 +28,11 @@ from mapapi.core.errors import (
     CommitUncertain,
     ConflictError,
     MapError,
+    NoQuorum,
     NotChunkLeader,
+    PeerUnavailable,
     ProposalLost,
+    RequestTimeout,
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
@@ -69,6 +72,10 @@ class LogCommits:
             transaction before it is proposed (they may read other chunks than the
             ones written, which holders of one chunk need not hold: a holder's
             decision depends on its replica of the chunk alone).
+        answers: whether a peer was heard of lately (liveness); when most of a
+            chunk's voters were not, a failed proposal or read names them
+            (`NoQuorum`).
+        label: how errors name a peer.
     """
 
     def __init__(
@@ -78,12 +85,17 @@ class LogCommits:
         address: Callable[[PeerId], str],
         clock: LamportClock,
         rules: Sequence[CommitRule] = (),
+        *,
+        answers: Callable[[PeerId], bool] | None = None,
+        label: Callable[[PeerId], str] = PeerId.__str__,
     ) -> None:
         self.groups = groups
         self.rpc = rpc
         self._address = address
         self.clock = clock
         self.rules = tuple(rules)
+        self._answers = answers
+        self._label = label
         rpc.register(RaftPropose, self.rpc_raft_propose)
 
     async def commit(self, tx: Transaction, message: str) -> Committed:
@@ -212,9 +224,21 @@ class LogCommits:
 
         Raises:
             ChunkBusy: the chunk stayed held by another transaction.
+            NoQuorum: most of the chunk's voters do not answer (named).
             NotChunkLeader: no leader was known in time.
             RequestTimeout, NetworkError, ProposalLost: the entry's fate is unknown.
         """
+        try:
+            return await self._propose_retrying(chunk, entry, timeout)
+        except (NotChunkLeader, RequestTimeout, PeerUnavailable) as exc:
+            raise self._explained(chunk, exc) from exc
+
+    async def _propose_retrying(
+        self,
+        chunk: ChunkId,
+        entry: LogEntry,
+        timeout: float,  # noqa: ASYNC109
+    ) -> Outcome:
         data = codec.encode_entry(entry)
         deadline = asyncio.get_running_loop().time() + timeout
         pause = RETRY_PAUSE
@@ -257,6 +281,7 @@ class LogCommits:
         commit applied later is stamped at or before it.
 
         Raises:
+            NoQuorum: most of the chunk's voters do not answer (named).
             NotChunkLeader: no leader was known in time.
             RequestTimeout: the leader could not confirm in time.
         """
@@ -265,10 +290,26 @@ class LogCommits:
             try:
                 await self.groups.catch_up(chunk, timeout)
                 return self.groups.store.raft_time(chunk)
-            except NotChunkLeader:
+            except NotChunkLeader as exc:
                 if asyncio.get_running_loop().time() + MAX_RETRY_PAUSE > deadline:
-                    raise
+                    raise self._explained(chunk, exc) from exc
                 await asyncio.sleep(MAX_RETRY_PAUSE * random.random())
+            except RequestTimeout as exc:
+                raise self._explained(chunk, exc) from exc
+
+    def _explained(self, chunk: ChunkId, error: MapError) -> MapError:
+        """`error`, or, when most of the chunk's voters do not answer here (a
+        minority cannot commit, DESIGN §13), a `NoQuorum` naming those voters."""
+        if self._answers is None:
+            return error
+        try:
+            voters = self.groups.voters(chunk)
+        except NotChunkLeader:  # not a member (any more)
+            return error
+        down = [p for p in voters if p != self.groups.me and not self._answers(p)]
+        if len(voters) - len(down) > len(voters) // 2:
+            return error
+        return NoQuorum(chunk, len(voters), [self._label(p) for p in down], str(error))
 
     async def _propose_once(self, chunk: ChunkId, entry: LogEntry, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):

@@ -123,9 +123,23 @@ class Swarm:
             states=StoreStates(store),
             on_members=store.set_holders,
         )
-        self.log = LogCommits(self.groups, self.rpc, self.members.address, clock, self._rules)
+        self.liveness = Liveness(self.rpc, self.members, store, liveness, events=self)
+        self.log = LogCommits(
+            self.groups,
+            self.rpc,
+            self.members.address,
+            clock,
+            self._rules,
+            answers=self.liveness.answers,
+            label=self.members.label,
+        )
         self.tx_recovery = TxRecovery(self.log)
-        self.group_members = GroupMembers(self.groups, self.rpc, self.members.address)
+        self.group_members = GroupMembers(
+            self.groups,
+            self.rpc,
+            self.members.address,
+            remove_after=self.liveness.options.remove_after,
+        )
         self._decide = applier(store)
         self._closed: dict[ChunkId, int] = {}  # chunk -> the time up to which reads are final
         self.replicator = Replicator(
@@ -141,7 +155,6 @@ class Swarm:
         self.subscriptions = Subscriptions(
             self.rpc, self.members, store, self.chord_options.holder_ttl
         )
-        self.liveness = Liveness(self.rpc, self.members, store, liveness, events=self)
         self._reaper: asyncio.Task[None] | None = None
         self._store = store
         self.chains = ChainWatch(
@@ -258,7 +271,8 @@ class Swarm:
                 self.ensure_group(info.id)
         self.groups.start()
         self.tx_recovery.start()
-        self._reaper = asyncio.get_running_loop().create_task(self._reap(1.0), name="reap")
+        every = min(1.0, self.liveness.options.remove_after / 4)
+        self._reaper = asyncio.get_running_loop().create_task(self._reap(every), name="reap")
         self._chord.start()
         self.replicator.index_on(self._chord)
         self.index = SpatialIndex(self._chord, self.grid)
