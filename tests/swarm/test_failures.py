@@ -136,12 +136,15 @@ class TestLeader:
 
 
 class TestMinority:
+    @pytest.mark.parametrize("survivor_leads", [True, False])
     async def test_a_minority_cannot_commit_and_names_the_missing_voters(
-        self, start: Start, make_repo: Callable[..., Repository]
+        self, start: Start, make_repo: Callable[..., Repository], survivor_leads: bool
     ) -> None:
         peers, _, chunk, item = await holders_of(start, make_repo, 3)
         await add_one(peers[0], item)
-        survivor, gone = peers[2], peers[:2]  # the leader among the gone, or the survivor
+        leader = await leader_among(peers, chunk)
+        survivor = leader if survivor_leads else next(p for p in peers if p is not leader)
+        gone = [p for p in peers if p is not survivor]
         view = survivor.begin()
         current = await view.get(TABLE, item)
         assert current is not None
