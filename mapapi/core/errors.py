@@ -8,7 +8,8 @@ Network errors (exit 5) end their message with `advice`: what a person should
 do next, which always begins with one of three verbs (`ADVICE_VERBS`):
 
 - "retry now": transient, the same call is likely to succeed at once;
-- "wait": a peer is restarting, being evicted or links are settling; the advice
+- "wait": a peer is restarting, a chunk's group is electing a leader or links are
+  settling; the advice
   says roughly how long before retrying;
 - "act": retrying cannot help until someone runs what the advice names.
 
@@ -28,9 +29,10 @@ if TYPE_CHECKING:
 
 ADVICE_VERBS = ("retry now", "wait", "act")
 
-# Seconds before a silent peer is declared dead and evicted by its co-holders
-# (mapapi.swarm.failure.DEAD_AFTER, 3 s), plus a round of the heartbeat: the "wait"
-# advice quotes it so people know how long "a moment" is.
+# Seconds before a silent peer is declared dead (mapapi.swarm.failure.DEAD_AFTER,
+# 3 s; requests to it then fail at once, and its chunks' groups have long elected
+# another leader), plus a round of the heartbeat: the "wait" advice quotes it so
+# people know how long "a moment" is.
 SETTLE_S = 5
 
 
@@ -208,22 +210,16 @@ class UnresolvedConflicts(TransactionError):
 
 
 class LockError(MapError):
-    """A problem with a chunk lock."""
+    """A lock could not be taken (the repository's store, held while writing it)."""
 
     code = 30
 
 
 class LockTimeout(LockError):
-    """A lock was not granted in time."""
+    """A lock was not granted in time (another process kept the store locked)."""
 
     retriable = True
     code = 31
-
-
-class LockNotHeld(LockError):
-    """A commit or unlock came from a writer without the current lease (stale token)."""
-
-    code = 32
 
 
 class NetworkError(MapError):
@@ -241,8 +237,8 @@ class PeerUnavailable(NetworkError):
     retriable = True
     code = 41
     advice = (
-        f"wait about {SETTLE_S} s and retry: the peer may be restarting, and a peer silent "
-        "for 3 s is evicted so the others go on; if it persists, check `mapctl peers`"
+        f"wait about {SETTLE_S} s and retry: the peer may be restarting, or its chunks' "
+        "groups electing another leader; if it persists, check `mapctl peers`"
     )
 
 
@@ -253,7 +249,8 @@ class RequestTimeout(NetworkError):
     code = 42
     advice = (
         "retry now (a reply can be lost on a busy link); if it times out again, wait "
-        f"about {SETTLE_S} s for the peer to restart or be evicted, then check `mapctl peers`"
+        f"about {SETTLE_S} s for the peer to restart or a new leader to be elected, then "
+        "check `mapctl peers`"
     )
 
 
@@ -417,7 +414,7 @@ class CorruptPayload(CorruptRepoError, UsageError):
     Read from the store, the store is damaged: `at` names the file and the
     item, and the CLI exits 1. It is also a UsageError because a revision
     received from another peer that does not parse is that peer's mistake
-    (`mapapi.swarm.commit_check` refuses the batch with it).
+    (`mapapi.swarm.commit_check` refuses a proposal with it).
 
     Args:
         table: the item's table.

@@ -13,8 +13,8 @@ raises `LimitExceeded` (or the codec's `ProtocolError`), whose message names
 the limit, so the sender learns which one it hit. docs/guarantees.md lists
 them ("Hostile input").
 
-The values are generous for a robot swarm's real traffic (a chunk is sent in
-parts of 5,000 revisions; swarms have tens of peers) and small enough that one
+The values are generous for a robot swarm's real traffic (a chunk's whole
+history travels in one snapshot; swarms have tens of peers) and small enough that one
 message cannot make a peer allocate much more than its own size.
 """
 
@@ -61,9 +61,6 @@ MAX_PAYLOAD_BYTES = 16 * 1024 * 1024
 MAX_TTL = 24 * 3600.0
 """The longest time-to-live (seconds) of a value stored in the Chord ring."""
 
-MAX_PARTS = 100_000
-"""Parts one chunk's transfer to a newcomer may announce (5,000 revisions each)."""
-
 MAX_NODE_STORAGE_BYTES = 256 * 1024 * 1024
 """What one Chord node stores for others, in member bytes (soft state)."""
 
@@ -76,8 +73,7 @@ MAX_LINKS = 1_024
 is closed (a later message reopens it)."""
 
 MAX_COUNT: dict[str, int] = {
-    "revisions": 200_000,  # per CommitBatch / ChunkPart / TriggerPush
-    "commits": 200_000,  # commit records per ChunkPart
+    "revisions": 200_000,  # per TriggerPush / RaftProposed
     "holders": 10_000,  # peers per message: a swarm is far smaller
     "members": 10_000,
     "predecessor": 1,
@@ -87,13 +83,6 @@ MAX_COUNT: dict[str, int] = {
     "chunks": 1_000_000,  # chunk summaries, or the chunks of one commit record
     "tables": 10_000,
     "where": 64,  # field filters of one subscription, evaluated on every commit
-    "dead": 10_000,  # holders an eviction takes out
-    "commit_ids": 10_000,  # commits asked about at once (in doubt: a handful)
-    "applied": 10_000,
-    "pending": 10_000,
-    "staged": 10_000,  # batches handed to an evictor
-    "apply": 10_000,
-    "drop": 10_000,
 }
 """Elements of a repeated field, by field name; see `MAX_LIST` for the others."""
 
@@ -215,18 +204,6 @@ def ttl(value: float) -> float:
     if not (math.isfinite(value) and 0 < value <= MAX_TTL):
         raise LimitExceeded(f"time-to-live {value!r} s is outside (0, {MAX_TTL:g}] (MAX_TTL)")
     return value
-
-
-def parts(part: int, of: int) -> None:
-    """Refuse a chunk transfer's part number `part` of `of` that makes no sense.
-
-    Raises:
-        LimitExceeded: `of` is 0 or above `MAX_PARTS`, or `part` is not below it.
-    """
-    if not 0 < of <= MAX_PARTS or part >= of:
-        raise LimitExceeded(
-            f"chunk part {part} of {of}: a transfer has 1 to {MAX_PARTS} parts (MAX_PARTS)"
-        )
 
 
 def payload(n: int) -> None:

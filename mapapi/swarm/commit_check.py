@@ -1,97 +1,101 @@
-"""What a holder checks of a commit batch before it stages it (DESIGN §5, §11).
+"""What a chunk's leader checks of a writer's proposal before it appends it
+(DESIGN §11, §13), and the application's commit rules (`CommitRule`).
 
-The writer holds the chunk's lock, so its batch is the commit; but a batch that
-breaks the store's invariants must never be applied, whoever sends it: every
-revision must belong to the locked chunk and its table, be stamped with the
-commit's id, time and author, come after the item's newest revision here (the
-lock grant merged clocks, so a real commit's time always does), keep the
-item's insert time, and carry a payload of the table's type (or none, for a
-removal). An item of another chunk may not be written through this one.
+Every holder decides a proposal from its replica and the proposal alone
+(`swarm/apply.py`), so a proposal that would break the store must never enter
+the log, whoever sends it: the leader refuses, before appending, a proposal or
+a readers' floor from a peer that is no member of the chunk's group, a proposal
+that speaks for another peer, writes to another chunk or table than the chunk's,
+to an item of another chunk, twice to one item, or carries a payload that is not
+of the table's type (or any, for a removal) or is over the size limit, and a
+commit decision for a transaction prepared here by another peer (only its
+coordinator decides commit; anyone may decide abort, as recovery does).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Protocol
 
-from mapapi.core import limits
-from mapapi.core.errors import UsageError
-from mapapi.core.history import CommitRecord, Revision
+from mapapi.core import codec, limits
+from mapapi.core.errors import NotParticipatingError, UsageError
 from mapapi.core.ids import ChunkId, PeerId
+from mapapi.core.proposal import LogEntry, Proposal, TxDecision
 from mapapi.core.table import TableDescriptor
-from mapapi.core.transaction import Change
+from mapapi.core.transaction import Change, Op
 from mapapi.store.base import ReplicaStore, Store
 
 
-def check_batch(
+def check_proposal(
     store: ReplicaStore,
     chunk: ChunkId,
-    record: CommitRecord,
-    revisions: Sequence[Revision],
-    writer: PeerId,
+    entry: LogEntry,
+    sender: PeerId,
+    members: Collection[PeerId],
 ) -> None:
-    """Refuse a batch that would break the store (see the module docstring).
+    """Refuse an entry from `sender` to `chunk`'s log that would break the store
+    (see the module docstring); `members` are the group's.
 
     Raises:
         ChunkNotFound: this peer does not hold `chunk`.
+        NotParticipatingError: `sender` is no member of the chunk's group.
         UsageError: naming the first problem found.
+        LimitExceeded: a payload over `MAX_PAYLOAD_BYTES`.
     """
-    table = store.chunk_table(chunk)
-    short = chunk.short
-    if record.author != writer:
-        raise UsageError(
-            f"commit {record.id.short} is by {record.author.short}, sent by {writer.short}"
-        )
-    if (chunk in record.chunks) != bool(revisions):
-        # An empty batch only locks a chunk a serializable commit read.
-        raise UsageError(
-            f"commit {record.id.short} {'does not list' if revisions else 'lists'} chunk "
-            f"{short} but its batch {'writes to it' if revisions else 'writes nothing'}"
-        )
-    descriptor = _descriptor(store, table)
-    latest = store.latest([r.item_id for r in revisions])
-    seen = set()
-    for r in revisions:
-        what = f"item {r.item_id.short} of commit {record.id.short}"
-        if r.item_id in seen:
-            raise UsageError(f"{what} appears twice in one batch")
-        seen.add(r.item_id)
-        if (r.chunk_id, r.table, r.commit_id, r.author) != (chunk, table, record.id, writer):
-            raise UsageError(
-                f"{what} is not filed under chunk {short}, table {table!r} and the commit"
-            )
-        if r.update_time != record.time:
-            raise UsageError(f"{what} is stamped {r.update_time}, its commit {record.time}")
-        _check_history(what, r, latest.get(r.item_id), chunk)
-        _check_payload(what, r, descriptor)
-
-
-def _check_history(what: str, r: Revision, previous: Revision | None, chunk: ChunkId) -> None:
-    if previous is None:
-        if r.insert_time != r.update_time:
-            raise UsageError(f"{what} is new here, but claims it was inserted at {r.insert_time}")
+    if isinstance(entry, TxDecision):
+        _check_decision(store, chunk, entry, sender)
         return
-    if previous.chunk_id != chunk:
-        raise UsageError(f"{what} belongs to chunk {previous.chunk_id.short}")
-    if previous.commit_id == r.commit_id:
-        return  # the same commit again: applying it twice changes nothing
-    if previous.update_time >= r.update_time:
-        raise UsageError(
-            f"{what} is stamped {r.update_time}, not after its newest revision "
-            f"({previous.update_time})"
+    if sender not in members:
+        raise NotParticipatingError(
+            f"peer {sender.short} is no member of chunk {chunk.short}'s group; "
+            "`mapctl chunk participate` there first"
         )
-    if r.insert_time not in (r.update_time, previous.insert_time):
-        raise UsageError(f"{what} changes the item's insert time")
+    if not isinstance(entry, Proposal):
+        return
+    if entry.author != sender:
+        raise UsageError(
+            f"a proposal by {entry.author.short} was sent by {sender.short}: a peer "
+            "proposes its own commits only"
+        )
+    table = store.chunk_table(chunk)
+    descriptor = _descriptor(store, table)
+    latest = store.latest([c.item_id for c in entry.changes])
+    seen = set()
+    for change in entry.changes:
+        what = f"item {change.item_id.short} of commit {entry.commit_id.short}"
+        if change.item_id in seen:
+            raise UsageError(f"{what} is changed twice in one proposal")
+        seen.add(change.item_id)
+        if (change.chunk_id, change.table) != (chunk, table):
+            raise UsageError(f"{what} is not filed under chunk {chunk.short} and table {table!r}")
+        previous = latest.get(change.item_id)
+        if previous is not None and previous.chunk_id != chunk:
+            raise UsageError(f"{what} belongs to chunk {previous.chunk_id.short}")
+        _check_payload(what, change, descriptor)
 
 
-def _check_payload(what: str, r: Revision, descriptor: TableDescriptor | None) -> None:
-    if r.removed:
-        if r.data:
+def _check_decision(store: ReplicaStore, chunk: ChunkId, entry: TxDecision, sender: PeerId) -> None:
+    if not entry.commit:
+        return
+    kept = store.raft_tx(chunk, entry.commit_id)
+    if kept is None or not kept.data:
+        return
+    prepared = codec.decode_entry(kept.data)
+    if isinstance(prepared, Proposal) and prepared.author != sender:
+        raise UsageError(
+            f"peer {sender.short} decided commit {entry.commit_id.short}, which "
+            f"{prepared.author.short} coordinates: only a coordinator decides commit"
+        )
+
+
+def _check_payload(what: str, change: Change, descriptor: TableDescriptor | None) -> None:
+    if change.op is Op.REMOVE:
+        if change.data:
             raise UsageError(f"{what} removes the item but carries a payload")
         return
-    limits.payload(len(r.data))
+    limits.payload(len(change.data))
     if descriptor is not None:
-        descriptor.decode(r.data)  # UsageError if it is not of the table's type
+        descriptor.decode(change.data)  # UsageError if it is not of the table's type
 
 
 def _descriptor(store: ReplicaStore, table: str) -> TableDescriptor | None:
@@ -105,9 +109,10 @@ def _descriptor(store: ReplicaStore, table: str) -> TableDescriptor | None:
 
 class CommitRule(Protocol):
     """An invariant an application layer keeps over its tables, given to `Peer`
-    at construction and checked by the writer on every commit, on the current
-    replica while it holds the chunks' locks (DESIGN §5 step 4), so it holds
-    whoever commits: a CLI, a script or an import.
+    at construction and checked by the writer on every commit, over the whole
+    transaction, on its replicas (alone: in the store's exclusive section,
+    `swarm/commit.py`; in a swarm: before proposing, `swarm/log_commit.py`), so
+    it holds whoever commits: a CLI, a script or an import.
     """
 
     def check(self, store: Store, changes: Sequence[Change]) -> None:

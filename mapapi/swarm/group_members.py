@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable
 
 from mapapi.core.errors import CorruptRepoError, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
+from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.chain_check import refuse_to_hand_on
@@ -31,6 +32,8 @@ from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
 
+PROBE_TIMEOUT = 2.0
+"""Seconds a joiner has to answer the leader's ping before it is taken in."""
 ELECTION_PAUSE = 0.05
 """Seconds before asking again a member that knows no leader (an election runs)."""
 
@@ -185,6 +188,9 @@ class GroupMembers:
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
         if add is not None and add not in groups.members(chunk):
             await refuse_to_hand_on(groups.store, chunk, groups.me)
+            # A joiner must be reachable where the swarm knows it: a stranger (or an
+            # address that does not answer) taken in as a voter would cost the quorum.
+            await self.rpc.request(self._address(add), Ping(), timeout=PROBE_TIMEOUT, expect=Pong)
         # One change of a chunk's members at a time, each from the members then: two
         # joins computed side by side would each take the other out again.
         async with self._changing.setdefault(chunk, asyncio.Lock()):

@@ -350,7 +350,14 @@ class RaftGroups:
 
     def rpc_raft_batch(self, req: Request) -> None:
         """Step every message of a batch into its group (unknown groups are skipped:
-        a message may arrive before `join` or after the chunk was dropped)."""
+        a message may arrive before `join` or after the chunk was dropped).
+
+        Only a member of the group, as this peer's configuration knows it, speaks
+        in it: Raft trusts its members, and a stranger's append with a higher term
+        would otherwise write its entries into the chunk. A peer that has joined
+        and knows no configuration yet hears anyone (its leader is not known to
+        it). The cost: a member that missed the change that added the current
+        leader drops the leader's messages until it joins again."""
         batch: RaftBatch = req.body
         sender = node_id(req.sender)
         touched: dict[ChunkId, GroupState] = {}
@@ -360,6 +367,10 @@ class RaftGroups:
                 continue
             if wire.sender != sender:  # a node speaks only for itself
                 log.warning("refused a raft message of node %d from %s", wire.sender, req.sender)
+                continue
+            members = group.node.config.members
+            if members and sender not in members:
+                log.debug("chunk %s: no member sent %s", wire.chunk.short, req.sender.short)
                 continue
             try:
                 message = from_wire(wire)

@@ -4,10 +4,10 @@
 as a heartbeat (the RPC layer reports each one through `heard`); every
 `interval` the peers that share a chunk with this one and were quiet that long
 get a `Ping`, and the detector re-evaluates them all. When a peer is declared
-dead its pending requests fail at once. Its owner, given at construction as
-`LivenessEvents`, hears when a peer is declared down and when a dead one is
-heard of again, sees every round's new state (to evict, `Recovery.tick`), and
-names peers to watch besides the co-holders.
+dead its pending requests fail at once. What follows from a verdict is asked of
+it by others: the leaders of a dead member's chunks remove it after a while
+(`is_dead`, `swarm/group_members.py`), and a proposal that fails names the
+voters that do not answer (`answers`, `swarm/log_commit.py`).
 """
 
 from __future__ import annotations
@@ -16,9 +16,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Protocol
 
 from mapapi.core.errors import MapError
 from mapapi.core.ids import PeerId
@@ -57,22 +55,6 @@ class LivenessOptions:
     remove_after: float = REMOVE_AFTER
 
 
-class LivenessEvents(Protocol):
-    """What a `Liveness` reports to its owner (the swarm), and asks of it."""
-
-    def peer_down(self, peer: PeerId) -> None:
-        """`peer` was declared down (here, or by the quorum that evicted it)."""
-
-    def peer_back(self, peer: PeerId) -> None:
-        """`peer`, declared dead before, was heard of again."""
-
-    def round_done(self) -> None:
-        """A round re-evaluated every watched peer (act on who is dead now)."""
-
-    def also_watch(self) -> Iterable[PeerId]:
-        """Peers to watch besides the co-holders (those evicted, to see them back)."""
-
-
 class Liveness:
     """Heartbeats and failure detection for one peer (see the module docstring).
 
@@ -81,7 +63,6 @@ class Liveness:
         members: who is who, and where.
         store: the chunks' holder sets (the co-holders are the peers watched).
         options: timing.
-        events: told of what the detector decides (None: nobody listens).
     """
 
     def __init__(
@@ -90,8 +71,6 @@ class Liveness:
         members: Members,
         store: ReplicaStore,
         options: LivenessOptions | None = None,
-        *,
-        events: LivenessEvents | None = None,
     ) -> None:
         self.rpc = rpc
         self.members = members
@@ -102,7 +81,6 @@ class Liveness:
             self.options.dead_after,
             pause_after=2 * self.options.interval,
         )
-        self.events = events
         self._task: asyncio.Task[None] | None = None
         self._pings: dict[PeerId, asyncio.Task[None]] = {}
 
@@ -122,15 +100,12 @@ class Liveness:
 
     def mark_down(self, peer: PeerId) -> None:
         """Treat `peer` as down until it is heard of again: requests to it fail at
-        once, those pending now included (it was declared dead, here or by the
-        quorum that evicted it)."""
+        once, those pending now included (it was declared dead)."""
         member = self.members.get(peer)
         if member is not None and member.address:
             who = f"peer {self.members.label(peer)}"
             self.rpc.down[member.address] = who
             self.rpc.fail_pending(member.address, f"{who} is down")
-        if self.events is not None:
-            self.events.peer_down(peer)
 
     def is_dead(self, peer: PeerId) -> bool:
         """Whether `peer` is declared dead (silent for `dead_after` seconds)."""
@@ -151,15 +126,13 @@ class Liveness:
     def tick(self) -> None:
         """One round: watch the co-holders, re-evaluate them, ping the quiet ones."""
         now = time.monotonic()
-        watched = self.co_holders() | set(self.events.also_watch() if self.events else ())
+        watched = self.co_holders()
         for peer in set(self.detector.watched()) - watched:
             self.detector.unwatch(peer)
         for peer in watched:
             self.detector.watch(peer, now)
         for change in self.detector.tick(now):
             self._report(change)
-        if self.events is not None:
-            self.events.round_done()
         for peer in watched:
             quiet = self.detector.silent_for(peer, now) >= self.options.interval
             if quiet and peer not in self._pings:
@@ -189,14 +162,12 @@ class Liveness:
         )
         if change.after is Health.DEAD:
             self.mark_down(change.peer)
-        elif change.before is Health.DEAD and self.events is not None:
-            self.events.peer_back(change.peer)
 
     async def _run(self) -> None:
         while True:
             try:
                 self.tick()
-            except MapError as exc:  # the store or a callback failed: try next round
+            except MapError as exc:  # the store failed: try next round
                 log.warning("liveness round failed: %s", exc)
             await asyncio.sleep(self.options.interval)
 

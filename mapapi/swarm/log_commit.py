@@ -41,7 +41,7 @@ from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.swarm.apply import Outcome
-from mapapi.swarm.commit_check import CommitRule
+from mapapi.swarm.commit_check import CommitRule, check_proposal
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.two_phase import Answer, TwoPhase
 
@@ -355,12 +355,17 @@ class LogCommits:
 
         Raises:
             NotChunkLeader: this peer does not lead the chunk (the writer asks again).
+            CorruptRepoError: the entry does not parse.
+            NotParticipatingError, UsageError: an entry that would break the store
+                (`check_proposal`).
             ConflictError: how the holders decided a proposal.
         """
         body: RaftPropose = req.body
         if not self.groups.is_leader(body.chunk):
             raise NotChunkLeader(body.chunk, self.groups.leader(body.chunk))
-        codec.decode_entry(body.proposal)  # refuse what would not apply (CorruptRepoError)
+        entry = codec.decode_entry(body.proposal)  # what would not apply: CorruptRepoError
+        members = {self.groups.me, *self.groups.members(body.chunk)}
+        check_proposal(self.groups.store, body.chunk, entry, req.sender, members)
         applied = (await self.groups.propose(body.chunk, body.proposal)).result
         assert isinstance(applied, Outcome)  # the groups apply with `apply_tx.applier`
         outcome = self._raise_failure(body.chunk, applied)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import random
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from mapapi.core import limits
@@ -123,7 +123,7 @@ class Swarm:
             states=StoreStates(store),
             on_members=store.set_holders,
         )
-        self.liveness = Liveness(self.rpc, self.members, store, liveness, events=self)
+        self.liveness = Liveness(self.rpc, self.members, store, liveness)
         self.log = LogCommits(
             self.groups,
             self.rpc,
@@ -232,20 +232,6 @@ class Swarm:
         """The other holders of a chunk this peer holds (none if it does not)."""
         holders = self._store.holders(chunk)
         return [p for p in holders if p != self._peer_id] if self._peer_id in holders else []
-
-    def peer_down(self, peer: PeerId) -> None:
-        """`LivenessEvents`: nothing to do at once; leaders remove a member dead
-        for a while (`_reap`), through the log."""
-
-    def peer_back(self, peer: PeerId) -> None:
-        """`LivenessEvents`: nothing to do; its groups catch it up by themselves."""
-
-    def round_done(self) -> None:
-        """`LivenessEvents`: nothing to do each round."""
-
-    def also_watch(self) -> Iterable[PeerId]:
-        """`LivenessEvents`: no peer beyond the co-holders."""
-        return ()
 
     @property
     def address(self) -> str:

@@ -17,6 +17,7 @@ from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId, PeerId
 from mapapi.core.table import TableDescriptor
 from mapapi.core.transaction import Transaction
+from mapapi.net.codec import Ping, Pong
 from mapapi.net.rpc import Rpc
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.sqlite import SqliteStore
@@ -28,6 +29,9 @@ from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.raft_types import Entry
 
 TIMEOUT = 10.0
+OPAQUE = "test.Opaque"
+"""The type of the tables here: payloads are raw bytes, of a type this process does
+not know, so no leader parses them (`swarm/commit_check.py`)."""
 TICK = 0.01  # fast ticks: elections in 0.1-0.2 s
 
 
@@ -41,6 +45,7 @@ class Node:
         self.holders: dict[ChunkId, list[PeerId]] = {}  # as the groups' configurations say
         self.changed = asyncio.Event()
         self.rpc = Rpc(ZmqTransport(peer, LamportClock()))
+        self.rpc.register(Ping, lambda req: Pong(req.body.payload))  # a leader pings a joiner
         self.groups = RaftGroups(
             peer,
             self.store,
@@ -154,7 +159,7 @@ class Writer(Ledger):
     name = "writer"
 
     def table(self, name: str) -> TableDescriptor:
-        return TableDescriptor(name, "google.protobuf.Struct")
+        return TableDescriptor(name, OPAQUE)
 
     def chunk_table(self, chunk_id: ChunkId) -> str:
         return self.store.chunk_table(chunk_id)

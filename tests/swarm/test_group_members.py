@@ -10,7 +10,7 @@ from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.group_members import REMOVE_AFTER
 from mapapi.swarm.raft_wire import node_id
-from tests.swarm.raft_world import World, Writer, leader_of
+from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 
 CHUNK = ChunkId.new()
@@ -20,7 +20,7 @@ ITEM = ItemId.new()
 async def group(world: World) -> tuple[list[Writer], Writer]:
     nodes = [await world.add(kind=Writer) for _ in range(3)]
     for node in nodes:
-        node.store.add_table("t", "google.protobuf.Struct")
+        node.store.add_table("t", OPAQUE)
         node.store.add_chunk(CHUNK, "t")
         node.groups.found(CHUNK, [n.id for n in nodes])
     leader = await leader_of(nodes, CHUNK)  # type: ignore[arg-type]

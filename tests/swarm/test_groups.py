@@ -22,6 +22,7 @@ from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.group_members import change_members
 from tests.swarm.raft_world import (
+    OPAQUE,
     Ledger,
     Node,
     World,
@@ -127,7 +128,7 @@ async def counter_group(world: World, kind: type[Node]) -> list[Node]:
     """Three peers of `kind` founding the group of a counters chunk."""
     nodes = [await world.add(kind=kind) for _ in range(3)]
     for node in nodes:
-        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_table("counters", OPAQUE)
         node.store.add_chunk(CHUNK, "counters")
         node.groups.found(CHUNK, [n.id for n in nodes])
     return nodes

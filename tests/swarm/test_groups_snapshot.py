@@ -9,7 +9,7 @@ from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.group_members import change_members
-from tests.swarm.raft_world import World, Writer, leader_of
+from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 
 CHUNK = ChunkId.new()
@@ -42,7 +42,7 @@ async def test_a_holder_joining_after_compaction_catches_up_from_a_snapshot(
     world.compact_after = 5
     nodes = [await world.add(kind=Writer) for _ in range(3)]
     for node in nodes:
-        node.store.add_table("counters", "google.protobuf.Struct")
+        node.store.add_table("counters", OPAQUE)
         node.store.add_chunk(CHUNK, "counters")
         node.groups.found(CHUNK, [n.id for n in nodes])
     leader = await leader_of(nodes, CHUNK)  # type: ignore[arg-type]
@@ -65,7 +65,7 @@ async def test_a_chunk_with_a_history_hands_it_to_every_holder_that_joins(
 ) -> None:
     first = await world.add(kind=Writer)
     store = first.store
-    store.add_table("counters", "google.protobuf.Struct")
+    store.add_table("counters", OPAQUE)
     store.add_chunk(CHUNK, "counters")
     for time in (1, 2, 3):  # committed alone, before the chunk had a group
         record = CommitRecord(CommitId.new(), time, first.id, f"v{time}", (CHUNK,))

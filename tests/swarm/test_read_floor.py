@@ -11,7 +11,7 @@ import pytest
 from mapapi.core.errors import ConflictError
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.transaction import Change, Op, Transaction
-from tests.swarm.raft_world import World, Writer, leader_of
+from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 
 CHUNK = ChunkId.new()
@@ -23,7 +23,7 @@ async def group(world: World) -> tuple[Writer, Writer]:
     """Three writers founding the chunk with ITEM in it; (a follower, the leader)."""
     nodes = [await world.add(kind=Writer) for _ in range(3)]
     for node in nodes:
-        node.store.add_table("t", "google.protobuf.Struct")
+        node.store.add_table("t", OPAQUE)
         node.store.add_chunk(CHUNK, "t")
         node.groups.found(CHUNK, [n.id for n in nodes])
     leader = await leader_of(nodes, CHUNK)  # type: ignore[arg-type]

@@ -14,7 +14,7 @@ from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.proposal import Proposal, TxDecision
 from mapapi.core.transaction import Change, Op, Transaction
 from mapapi.swarm.tx_recovery import TxRecovery
-from tests.swarm.raft_world import World, Writer, leader_of
+from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 
 TABLE = "accounts"
@@ -28,7 +28,7 @@ async def bank(world: World) -> list[Writer]:
     and the two accounts opened by one transaction over both chunks."""
     nodes = [await world.add(kind=Writer) for _ in range(3)]
     for node in nodes:
-        node.store.add_table(TABLE, "google.protobuf.Struct")
+        node.store.add_table(TABLE, OPAQUE)
         for chunk in (A, B):
             node.store.add_chunk(chunk, TABLE)
             node.groups.found(chunk, [n.id for n in nodes])

@@ -1,8 +1,9 @@
-"""What a holder refuses to stage (mapapi.swarm.commit_check, DESIGN §5 and §11).
+"""What a chunk's leader refuses to append (mapapi.swarm.commit_check, DESIGN §11, §13).
 
-A real commit batch passes; each way a hostile or broken writer could make one
-break the store (an item of another chunk, a wrong table, a stale time, a
-payload of another type, ...) is refused with a UsageError naming it.
+A real proposal passes; each way a hostile or broken writer could make one break
+every replica (another author, an item of another chunk, a wrong table, a payload
+of another type or over the limit, ...) is refused with a UsageError naming it,
+before the proposal enters the chunk's log.
 """
 
 from __future__ import annotations
@@ -14,19 +15,24 @@ from pathlib import Path
 import pytest
 
 from mapapi._pb.mapapi.v1.types_pb2 import Counter
-from mapapi.core import limits
-from mapapi.core.errors import ChunkNotFound, LimitExceeded, UsageError
+from mapapi.core import codec, limits
+from mapapi.core.errors import ChunkNotFound, LimitExceeded, NotParticipatingError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal, TimeFloor, TxDecision
+from mapapi.core.transaction import Change, Op
+from mapapi.store.base import TxRow
 from mapapi.store.sqlite import SqliteStore
-from mapapi.swarm.commit_check import check_batch
+from mapapi.swarm.commit_check import check_proposal
 
-WRITER = PeerId.new()
+WRITER, STRANGER = PeerId.new(), PeerId.new()
+MEMBERS = {WRITER, PeerId.new()}  # the group of chunk a
 TABLE = "counters"
+ONE = Counter(value=1).SerializeToString()
 
 
 class World:
-    """A store with two chunks of counters; item `old` was written at time 5 in `a`."""
+    """A store with chunks a and b of counters (item `other` is in b) and c of another table."""
 
     def __init__(self, store: SqliteStore) -> None:
         self.store = store
@@ -36,114 +42,91 @@ class World:
         store.add_chunk(self.a, TABLE)
         store.add_chunk(self.b, TABLE)
         store.add_chunk(self.c, "other")
-        self.old = ItemId.new()
-        first = CommitRecord(CommitId.new(), 5, WRITER, "", (self.a,))
-        store.apply_commit(
-            first, [self.revision(first, self.old, Counter(value=1).SerializeToString())]
-        )
-        self.other = ItemId.new()  # an item of chunk b
-        second = CommitRecord(CommitId.new(), 6, WRITER, "", (self.b,))
-        store.apply_commit(second, [self.revision(second, self.other, b"")])
+        self.old, self.other = ItemId.new(), ItemId.new()
+        for item, chunk in ((self.old, self.a), (self.other, self.b)):
+            record = CommitRecord(CommitId.new(), 5, WRITER, "", (chunk,))
+            revision = Revision(item, TABLE, chunk, ONE, 5, 5, False, WRITER, record.id)
+            store.apply_commit(record, [revision])
 
-    def revision(
-        self, record: CommitRecord, item: ItemId, data: bytes, **changes: object
-    ) -> Revision:
-        chunk = record.chunks[0]
-        previous = self.store.latest([item]).get(item)
-        inserted = previous.insert_time if previous else record.time
-        revision = Revision(
-            item, TABLE, chunk, data, inserted, record.time, False, WRITER, record.id
+    def proposal(self, *changes: Change, author: PeerId = WRITER) -> Proposal:
+        """A proposal to chunk a: by default an update of `old` and an insert."""
+        changes = changes or (
+            Change(Op.UPDATE, TABLE, self.old, self.a, Counter(value=2).SerializeToString()),
+            Change(Op.INSERT, TABLE, ItemId.new(), self.a, ONE),
         )
-        return dataclasses.replace(revision, **changes)  # type: ignore[arg-type]
-
-    def batch(self, **changes: object) -> tuple[CommitRecord, list[Revision]]:
-        """A valid batch at time 9 updating `old` and inserting a new item in `a`."""
-        record = CommitRecord(CommitId.new(), 9, WRITER, "m", (self.a,))
-        data = Counter(value=2).SerializeToString()
-        update = self.revision(record, self.old, data)
-        insert = self.revision(record, ItemId.new(), data)
-        return record, [dataclasses.replace(update, **changes), insert]  # type: ignore[arg-type]
+        return Proposal(CommitId.new(), 9, author, "w", "", "m", 5, "snapshot", changes)
 
 
 @pytest.fixture
 def world(tmp_path: Path) -> Iterator[World]:
-    store = SqliteStore(tmp_path / "s.sqlite", create=True)
+    store = SqliteStore(tmp_path / "store.sqlite", create=True)
     yield World(store)
     store.close()
 
 
-class TestCheckBatch:
-    def test_a_real_batch_passes_and_applies(self, world: World) -> None:
-        record, revisions = world.batch()
-        check_batch(world.store, world.a, record, revisions, WRITER)
-        world.store.apply_commit(record, revisions)
-        check_batch(world.store, world.a, record, revisions, WRITER)  # the same commit again
+def test_a_real_proposal_decisions_and_floors_pass(world: World) -> None:
+    check_proposal(world.store, world.a, world.proposal(), WRITER, MEMBERS)
+    check_proposal(world.store, world.a, TxDecision(CommitId.new(), False), PeerId.new(), ())
+    check_proposal(world.store, world.a, TimeFloor(7), WRITER, MEMBERS)
 
-    def test_an_empty_batch_only_locks_a_chunk_the_commit_does_not_list(self, world: World) -> None:
-        record, _ = world.batch()
-        check_batch(world.store, world.b, record, [], WRITER)  # a serializable read lock
-        with pytest.raises(UsageError, match=r"lists chunk .* but its batch writes nothing"):
-            check_batch(world.store, world.a, record, [], WRITER)
-        _, revisions = world.batch()
-        with pytest.raises(UsageError, match="does not list chunk"):
-            check_batch(world.store, world.b, record, revisions, WRITER)
 
-    def test_an_unknown_chunk(self, world: World) -> None:
-        record, revisions = world.batch()
-        with pytest.raises(ChunkNotFound):
-            check_batch(world.store, ChunkId.new(), record, revisions, WRITER)
+def test_a_proposal_in_someone_elses_name_is_refused(world: World) -> None:
+    with pytest.raises(UsageError, match="proposes its own commits only"):
+        check_proposal(world.store, world.a, world.proposal(), STRANGER, {*MEMBERS, STRANGER})
 
-    @pytest.mark.parametrize(
-        ("changes", "text"),
-        [
-            ({"table": "other"}, "is not filed under chunk"),
-            ({"commit_id": CommitId.new()}, "is not filed under chunk"),
-            ({"author": PeerId.new()}, "is not filed under chunk"),
-            ({"update_time": 10}, "is stamped 10, its commit 9"),
-            ({"insert_time": 7}, "changes the item's insert time"),
-            ({"data": b"\xff\xff\xff"}, "does not parse"),
-            ({"removed": True}, "removes the item but carries a payload"),
-        ],
+
+@pytest.mark.parametrize(
+    ("change", "complaint"),
+    [
+        (lambda w: Change(Op.INSERT, TABLE, ItemId.new(), w.b, ONE), "not filed under chunk"),
+        (lambda w: Change(Op.INSERT, "other", ItemId.new(), w.a, ONE), "not filed under chunk"),
+        (lambda w: Change(Op.UPDATE, TABLE, w.other, w.a, ONE), "belongs to chunk"),
+        (lambda w: Change(Op.REMOVE, TABLE, w.old, w.a, ONE), "carries a payload"),
+        (lambda w: Change(Op.UPDATE, TABLE, w.old, w.a, b"\xff\xff"), "Counter"),
+    ],
+)
+def test_a_write_that_would_break_the_store_is_refused(
+    world: World, change: object, complaint: str
+) -> None:
+    bad = change(world)  # type: ignore[operator]
+    with pytest.raises(UsageError, match=complaint):
+        check_proposal(world.store, world.a, world.proposal(bad), WRITER, MEMBERS)
+
+
+def test_one_item_twice_is_refused(world: World) -> None:
+    twice = Change(Op.UPDATE, TABLE, world.old, world.a, ONE)
+    with pytest.raises(UsageError, match="changed twice"):
+        check_proposal(
+            world.store, world.a, world.proposal(twice, dataclasses.replace(twice)), WRITER, MEMBERS
+        )
+
+
+def test_a_payload_over_its_limit_and_an_unknown_chunk_are_refused(
+    world: World, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(limits, "MAX_PAYLOAD_BYTES", 10)
+    big = Change(
+        Op.INSERT, TABLE, ItemId.new(), world.a, Counter(name="x" * 20).SerializeToString()
     )
-    def test_a_revision_that_does_not_fit(
-        self, world: World, changes: dict[str, object], text: str
-    ) -> None:
-        record, revisions = world.batch(**changes)
-        with pytest.raises(UsageError, match=text):
-            check_batch(world.store, world.a, record, revisions, WRITER)
+    with pytest.raises(LimitExceeded):
+        check_proposal(world.store, world.a, world.proposal(big), WRITER, MEMBERS)
+    with pytest.raises(ChunkNotFound):
+        check_proposal(world.store, ChunkId.new(), world.proposal(), WRITER, MEMBERS)
 
-    def test_another_writer_than_the_author(self, world: World) -> None:
-        record, revisions = world.batch()
-        with pytest.raises(UsageError, match="sent by"):
-            check_batch(world.store, world.a, record, revisions, PeerId.new())
 
-    def test_an_item_of_another_chunk(self, world: World) -> None:
-        record, revisions = world.batch()
-        stolen = world.revision(record, world.other, b"")
-        with pytest.raises(UsageError, match=f"belongs to chunk {world.b.short}"):
-            check_batch(world.store, world.a, record, [*revisions, stolen], WRITER)
+def test_a_peer_that_is_no_member_proposes_nothing(world: World) -> None:
+    for entry in (world.proposal(author=STRANGER), TimeFloor(7)):
+        with pytest.raises(NotParticipatingError, match="no member"):
+            check_proposal(world.store, world.a, entry, STRANGER, MEMBERS)
 
-    def test_a_time_not_after_the_items_newest_revision(self, world: World) -> None:
-        record, revisions = world.batch()
-        early = dataclasses.replace(record, time=5)
-        stale = [dataclasses.replace(r, update_time=5) for r in revisions]
-        with pytest.raises(UsageError, match="not after its newest revision"):
-            check_batch(world.store, world.a, early, stale, WRITER)
 
-    def test_a_new_item_with_an_old_insert_time(self, world: World) -> None:
-        record, (_, insert) = world.batch()
-        with pytest.raises(UsageError, match="is new here"):
-            check_batch(
-                world.store, world.a, record, [dataclasses.replace(insert, insert_time=1)], WRITER
-            )
-
-    def test_one_item_twice(self, world: World) -> None:
-        record, (update, _) = world.batch()
-        with pytest.raises(UsageError, match="appears twice"):
-            check_batch(world.store, world.a, record, [update, update], WRITER)
-
-    def test_a_payload_over_the_limit(self, world: World, monkeypatch: pytest.MonkeyPatch) -> None:
-        monkeypatch.setattr(limits, "MAX_PAYLOAD_BYTES", 1)
-        record, revisions = world.batch()
-        with pytest.raises(LimitExceeded, match="MAX_PAYLOAD_BYTES"):
-            check_batch(world.store, world.a, record, revisions, WRITER)
+def test_only_the_coordinator_decides_commit(world: World) -> None:
+    prepare = dataclasses.replace(world.proposal(), participants=(world.a, world.b))
+    world.store.raft_save(world.a, hard=(1, 0, 0))
+    row = TxRow("prepared", 9, codec.encode_entry(prepare))
+    world.store.raft_tx_put(world.a, prepare.commit_id, row)
+    commit = TxDecision(prepare.commit_id, True, 9)
+    with pytest.raises(UsageError, match="only a coordinator decides commit"):
+        check_proposal(world.store, world.a, commit, STRANGER, MEMBERS)
+    check_proposal(world.store, world.a, commit, WRITER, MEMBERS)
+    check_proposal(world.store, world.a, TxDecision(prepare.commit_id, False), STRANGER, ())

@@ -1,7 +1,7 @@
 """The bodies of swarm messages (DESIGN §5-7, §13): plain frozen dataclasses, one
 module per protocol area: `peers` (meeting, leaving, control calls), `holding`
-(chunks and holders), `commit` (the lock, the batch, eviction), `chord` (the
-ring), `raft` (a group per chunk).
+(chunks and holders), `triggers` (pushes to subscribers), `chord` (the ring),
+`raft` (a group per chunk).
 
 Each class maps field by field onto the message of the same name in
 `proto/mapapi/v1/wire.proto`; `mapapi.net.codec` converts them generically.
@@ -11,7 +11,7 @@ bool, `Member`, `TableInfo`, `Revision`, `CommitRecord`, and tuples of those.
 
 from __future__ import annotations
 
-from mapapi.net.messages import chord, commit, holding, peers, raft
+from mapapi.net.messages import chord, holding, peers, raft, triggers
 from mapapi.net.messages.chord import (
     ChordAdd,
     ChordEntry,
@@ -27,31 +27,12 @@ from mapapi.net.messages.chord import (
     ChordStore,
     ChordValues,
 )
-from mapapi.net.messages.commit import (
-    CommitAbort,
-    CommitApply,
-    CommitBatch,
-    CommitStatus,
-    CommitStatusQuery,
-    EvictCommit,
-    Evicted,
-    EvictGrant,
-    EvictRequest,
-    LockGrant,
-    LockRequest,
-    StagedBatch,
-    TriggerPush,
-    Unlock,
-)
 from mapapi.net.messages.holding import (
     ChunkList,
     ChunkListQuery,
-    ChunkPart,
     ChunkSummary,
-    HolderChange,
     Holders,
     HoldersQuery,
-    ParticipateRequest,
     TableInfo,
 )
 from mapapi.net.messages.peers import (
@@ -74,11 +55,12 @@ from mapapi.net.messages.raft import (
     RaftPropose,
     RaftProposed,
 )
+from mapapi.net.messages.triggers import TriggerPush
 
 SWARM_BODIES: dict[str, type] = {
     **peers.BODIES,
     **holding.BODIES,
-    **commit.BODIES,
+    **triggers.BODIES,
     **chord.BODIES,
     **raft.BODIES,
 }
@@ -104,38 +86,22 @@ __all__ = [
     "ChordValues",
     "ChunkList",
     "ChunkListQuery",
-    "ChunkPart",
     "ChunkSummary",
-    "CommitAbort",
-    "CommitApply",
-    "CommitBatch",
-    "CommitStatus",
-    "CommitStatusQuery",
     "ControlCall",
     "ControlResult",
-    "EvictCommit",
-    "EvictGrant",
-    "EvictRequest",
-    "Evicted",
     "GroupChanged",
     "GroupJoin",
     "GroupLeave",
     "Hello",
-    "HolderChange",
     "Holders",
     "HoldersQuery",
-    "LockGrant",
-    "LockRequest",
     "Member",
-    "ParticipateRequest",
     "RaftBatch",
     "RaftEntry",
     "RaftMessage",
     "RaftPropose",
     "RaftProposed",
-    "StagedBatch",
     "TableInfo",
     "TriggerPush",
-    "Unlock",
     "Welcome",
 ]

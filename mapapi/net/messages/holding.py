@@ -1,4 +1,4 @@
-"""Chunks and their holders: who holds what, and a newcomer taking a chunk in.
+"""Chunks and their holders: who holds what (DESIGN §7), and a table's name and type.
 
 Plain frozen dataclasses, each mapping field by field onto the message of the
 same name in `proto/mapapi/v1/wire.proto` (see `mapapi.net.messages`).
@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.net.messages.peers import Member
 
@@ -19,36 +18,6 @@ class TableInfo:
 
     name: str
     type_name: str
-
-
-@dataclass(frozen=True, slots=True)
-class ParticipateRequest:
-    """Newcomer to holder: make me a holder of `chunk`."""
-
-    chunk: ChunkId
-
-
-@dataclass(frozen=True, slots=True)
-class ChunkPart:
-    """One part of a chunk's full state, sent to a newcomer under the lock."""
-
-    chunk: ChunkId
-    table: TableInfo
-    holders: tuple[Member, ...]
-    revisions: tuple[Revision, ...]
-    commits: tuple[CommitRecord, ...]
-    part: int
-    parts: int
-
-
-@dataclass(frozen=True, slots=True)
-class HolderChange:
-    """A holder joined (or left) the chunk; sent under the chunk's lock."""
-
-    chunk: ChunkId
-    token: int
-    member: Member
-    joined: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,9 +61,6 @@ class ChunkList:
 
 
 BODIES: dict[str, type] = {
-    "participate": ParticipateRequest,
-    "chunk_part": ChunkPart,
-    "holder_change": HolderChange,
     "holders_query": HoldersQuery,
     "holders": Holders,
     "chunk_list_query": ChunkListQuery,

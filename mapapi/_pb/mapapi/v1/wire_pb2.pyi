@@ -9,7 +9,7 @@ from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
 DESCRIPTOR: _descriptor.FileDescriptor
 
 class Envelope(_message.Message):
-    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "lock_request", "lock_grant", "unlock", "commit_batch", "commit_apply", "commit_abort", "participate", "chunk_part", "holder_change", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "commit_status_query", "commit_status", "evict_request", "evict_grant", "evict_commit", "evicted", "raft_batch", "raft_propose", "raft_proposed", "chain_head", "group_join", "group_leave", "group_changed")
+    __slots__ = ("request_id", "sender", "lamport", "kind", "error", "ping", "pong", "ack", "holders_query", "holders", "chord_find_successor", "chord_hop", "chord_get_neighbours", "chord_neighbours", "chord_notify", "chord_leave", "chord_add", "chord_remove", "chord_get", "chord_values", "chord_store", "chunk_list_query", "chunk_list", "trigger_push", "hello", "welcome", "bye", "control_call", "control_result", "raft_batch", "raft_propose", "raft_proposed", "chain_head", "group_join", "group_leave", "group_changed")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Envelope.Kind]
@@ -28,15 +28,6 @@ class Envelope(_message.Message):
     PING_FIELD_NUMBER: _ClassVar[int]
     PONG_FIELD_NUMBER: _ClassVar[int]
     ACK_FIELD_NUMBER: _ClassVar[int]
-    LOCK_REQUEST_FIELD_NUMBER: _ClassVar[int]
-    LOCK_GRANT_FIELD_NUMBER: _ClassVar[int]
-    UNLOCK_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_BATCH_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_APPLY_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_ABORT_FIELD_NUMBER: _ClassVar[int]
-    PARTICIPATE_FIELD_NUMBER: _ClassVar[int]
-    CHUNK_PART_FIELD_NUMBER: _ClassVar[int]
-    HOLDER_CHANGE_FIELD_NUMBER: _ClassVar[int]
     HOLDERS_QUERY_FIELD_NUMBER: _ClassVar[int]
     HOLDERS_FIELD_NUMBER: _ClassVar[int]
     CHORD_FIND_SUCCESSOR_FIELD_NUMBER: _ClassVar[int]
@@ -58,12 +49,6 @@ class Envelope(_message.Message):
     BYE_FIELD_NUMBER: _ClassVar[int]
     CONTROL_CALL_FIELD_NUMBER: _ClassVar[int]
     CONTROL_RESULT_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_STATUS_QUERY_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_STATUS_FIELD_NUMBER: _ClassVar[int]
-    EVICT_REQUEST_FIELD_NUMBER: _ClassVar[int]
-    EVICT_GRANT_FIELD_NUMBER: _ClassVar[int]
-    EVICT_COMMIT_FIELD_NUMBER: _ClassVar[int]
-    EVICTED_FIELD_NUMBER: _ClassVar[int]
     RAFT_BATCH_FIELD_NUMBER: _ClassVar[int]
     RAFT_PROPOSE_FIELD_NUMBER: _ClassVar[int]
     RAFT_PROPOSED_FIELD_NUMBER: _ClassVar[int]
@@ -79,15 +64,6 @@ class Envelope(_message.Message):
     ping: Ping
     pong: Pong
     ack: Ack
-    lock_request: LockRequest
-    lock_grant: LockGrant
-    unlock: Unlock
-    commit_batch: CommitBatch
-    commit_apply: CommitApply
-    commit_abort: CommitAbort
-    participate: ParticipateRequest
-    chunk_part: ChunkPart
-    holder_change: HolderChange
     holders_query: HoldersQuery
     holders: Holders
     chord_find_successor: ChordFindSuccessor
@@ -109,12 +85,6 @@ class Envelope(_message.Message):
     bye: Bye
     control_call: ControlCall
     control_result: ControlResult
-    commit_status_query: CommitStatusQuery
-    commit_status: CommitStatus
-    evict_request: EvictRequest
-    evict_grant: EvictGrant
-    evict_commit: EvictCommit
-    evicted: Evicted
     raft_batch: RaftBatch
     raft_propose: RaftPropose
     raft_proposed: RaftProposed
@@ -122,7 +92,7 @@ class Envelope(_message.Message):
     group_join: GroupJoin
     group_leave: GroupLeave
     group_changed: GroupChanged
-    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., lock_request: _Optional[_Union[LockRequest, _Mapping]] = ..., lock_grant: _Optional[_Union[LockGrant, _Mapping]] = ..., unlock: _Optional[_Union[Unlock, _Mapping]] = ..., commit_batch: _Optional[_Union[CommitBatch, _Mapping]] = ..., commit_apply: _Optional[_Union[CommitApply, _Mapping]] = ..., commit_abort: _Optional[_Union[CommitAbort, _Mapping]] = ..., participate: _Optional[_Union[ParticipateRequest, _Mapping]] = ..., chunk_part: _Optional[_Union[ChunkPart, _Mapping]] = ..., holder_change: _Optional[_Union[HolderChange, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., commit_status_query: _Optional[_Union[CommitStatusQuery, _Mapping]] = ..., commit_status: _Optional[_Union[CommitStatus, _Mapping]] = ..., evict_request: _Optional[_Union[EvictRequest, _Mapping]] = ..., evict_grant: _Optional[_Union[EvictGrant, _Mapping]] = ..., evict_commit: _Optional[_Union[EvictCommit, _Mapping]] = ..., evicted: _Optional[_Union[Evicted, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ..., raft_propose: _Optional[_Union[RaftPropose, _Mapping]] = ..., raft_proposed: _Optional[_Union[RaftProposed, _Mapping]] = ..., chain_head: _Optional[_Union[ChainHead, _Mapping]] = ..., group_join: _Optional[_Union[GroupJoin, _Mapping]] = ..., group_leave: _Optional[_Union[GroupLeave, _Mapping]] = ..., group_changed: _Optional[_Union[GroupChanged, _Mapping]] = ...) -> None: ...
+    def __init__(self, request_id: _Optional[int] = ..., sender: _Optional[bytes] = ..., lamport: _Optional[int] = ..., kind: _Optional[_Union[Envelope.Kind, str]] = ..., error: _Optional[_Union[ErrorReply, _Mapping]] = ..., ping: _Optional[_Union[Ping, _Mapping]] = ..., pong: _Optional[_Union[Pong, _Mapping]] = ..., ack: _Optional[_Union[Ack, _Mapping]] = ..., holders_query: _Optional[_Union[HoldersQuery, _Mapping]] = ..., holders: _Optional[_Union[Holders, _Mapping]] = ..., chord_find_successor: _Optional[_Union[ChordFindSuccessor, _Mapping]] = ..., chord_hop: _Optional[_Union[ChordHop, _Mapping]] = ..., chord_get_neighbours: _Optional[_Union[ChordGetNeighbours, _Mapping]] = ..., chord_neighbours: _Optional[_Union[ChordNeighbours, _Mapping]] = ..., chord_notify: _Optional[_Union[ChordNotify, _Mapping]] = ..., chord_leave: _Optional[_Union[ChordLeave, _Mapping]] = ..., chord_add: _Optional[_Union[ChordAdd, _Mapping]] = ..., chord_remove: _Optional[_Union[ChordRemove, _Mapping]] = ..., chord_get: _Optional[_Union[ChordGet, _Mapping]] = ..., chord_values: _Optional[_Union[ChordValues, _Mapping]] = ..., chord_store: _Optional[_Union[ChordStore, _Mapping]] = ..., chunk_list_query: _Optional[_Union[ChunkListQuery, _Mapping]] = ..., chunk_list: _Optional[_Union[ChunkList, _Mapping]] = ..., trigger_push: _Optional[_Union[TriggerPush, _Mapping]] = ..., hello: _Optional[_Union[Hello, _Mapping]] = ..., welcome: _Optional[_Union[Welcome, _Mapping]] = ..., bye: _Optional[_Union[Bye, _Mapping]] = ..., control_call: _Optional[_Union[ControlCall, _Mapping]] = ..., control_result: _Optional[_Union[ControlResult, _Mapping]] = ..., raft_batch: _Optional[_Union[RaftBatch, _Mapping]] = ..., raft_propose: _Optional[_Union[RaftPropose, _Mapping]] = ..., raft_proposed: _Optional[_Union[RaftProposed, _Mapping]] = ..., chain_head: _Optional[_Union[ChainHead, _Mapping]] = ..., group_join: _Optional[_Union[GroupJoin, _Mapping]] = ..., group_leave: _Optional[_Union[GroupLeave, _Mapping]] = ..., group_changed: _Optional[_Union[GroupChanged, _Mapping]] = ...) -> None: ...
 
 class ErrorReply(_message.Message):
     __slots__ = ("code", "message", "conflicts", "seen_at")
@@ -161,100 +131,6 @@ class Member(_message.Message):
     address: str
     name: str
     def __init__(self, id: _Optional[bytes] = ..., address: _Optional[str] = ..., name: _Optional[str] = ...) -> None: ...
-
-class LockRequest(_message.Message):
-    __slots__ = ("chunk", "token")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ...) -> None: ...
-
-class LockGrant(_message.Message):
-    __slots__ = ("chunk", "token", "lease")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    LEASE_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    lease: float
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., lease: _Optional[float] = ...) -> None: ...
-
-class Unlock(_message.Message):
-    __slots__ = ("chunk", "token")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ...) -> None: ...
-
-class CommitBatch(_message.Message):
-    __slots__ = ("chunk", "token", "record", "revisions")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    RECORD_FIELD_NUMBER: _ClassVar[int]
-    REVISIONS_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    record: _core_pb2.CommitRecord
-    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ...) -> None: ...
-
-class CommitApply(_message.Message):
-    __slots__ = ("chunk", "token", "commit_id")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    commit_id: bytes
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., commit_id: _Optional[bytes] = ...) -> None: ...
-
-class CommitAbort(_message.Message):
-    __slots__ = ("chunk", "token", "commit_id")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    commit_id: bytes
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., commit_id: _Optional[bytes] = ...) -> None: ...
-
-class ParticipateRequest(_message.Message):
-    __slots__ = ("chunk",)
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
-
-class ChunkPart(_message.Message):
-    __slots__ = ("chunk", "table", "holders", "revisions", "commits", "part", "parts")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TABLE_FIELD_NUMBER: _ClassVar[int]
-    HOLDERS_FIELD_NUMBER: _ClassVar[int]
-    REVISIONS_FIELD_NUMBER: _ClassVar[int]
-    COMMITS_FIELD_NUMBER: _ClassVar[int]
-    PART_FIELD_NUMBER: _ClassVar[int]
-    PARTS_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    table: _core_pb2.TableDescriptor
-    holders: _containers.RepeatedCompositeFieldContainer[Member]
-    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
-    commits: _containers.RepeatedCompositeFieldContainer[_core_pb2.CommitRecord]
-    part: int
-    parts: int
-    def __init__(self, chunk: _Optional[bytes] = ..., table: _Optional[_Union[_core_pb2.TableDescriptor, _Mapping]] = ..., holders: _Optional[_Iterable[_Union[Member, _Mapping]]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[_core_pb2.CommitRecord, _Mapping]]] = ..., part: _Optional[int] = ..., parts: _Optional[int] = ...) -> None: ...
-
-class HolderChange(_message.Message):
-    __slots__ = ("chunk", "token", "member", "joined")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    MEMBER_FIELD_NUMBER: _ClassVar[int]
-    JOINED_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    member: Member
-    joined: bool
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., member: _Optional[_Union[Member, _Mapping]] = ..., joined: _Optional[bool] = ...) -> None: ...
 
 class HoldersQuery(_message.Message):
     __slots__ = ("chunk", "item")
@@ -449,68 +325,6 @@ class ControlResult(_message.Message):
     JSON_FIELD_NUMBER: _ClassVar[int]
     json: str
     def __init__(self, json: _Optional[str] = ...) -> None: ...
-
-class CommitStatusQuery(_message.Message):
-    __slots__ = ("chunk", "commit_ids")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    COMMIT_IDS_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    commit_ids: _containers.RepeatedScalarFieldContainer[bytes]
-    def __init__(self, chunk: _Optional[bytes] = ..., commit_ids: _Optional[_Iterable[bytes]] = ...) -> None: ...
-
-class CommitStatus(_message.Message):
-    __slots__ = ("applied", "pending")
-    APPLIED_FIELD_NUMBER: _ClassVar[int]
-    PENDING_FIELD_NUMBER: _ClassVar[int]
-    applied: _containers.RepeatedScalarFieldContainer[bytes]
-    pending: _containers.RepeatedScalarFieldContainer[bytes]
-    def __init__(self, applied: _Optional[_Iterable[bytes]] = ..., pending: _Optional[_Iterable[bytes]] = ...) -> None: ...
-
-class StagedBatch(_message.Message):
-    __slots__ = ("record", "revisions")
-    RECORD_FIELD_NUMBER: _ClassVar[int]
-    REVISIONS_FIELD_NUMBER: _ClassVar[int]
-    record: _core_pb2.CommitRecord
-    revisions: _containers.RepeatedCompositeFieldContainer[_core_pb2.Revision]
-    def __init__(self, record: _Optional[_Union[_core_pb2.CommitRecord, _Mapping]] = ..., revisions: _Optional[_Iterable[_Union[_core_pb2.Revision, _Mapping]]] = ...) -> None: ...
-
-class EvictRequest(_message.Message):
-    __slots__ = ("chunk", "dead")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    DEAD_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    dead: _containers.RepeatedScalarFieldContainer[bytes]
-    def __init__(self, chunk: _Optional[bytes] = ..., dead: _Optional[_Iterable[bytes]] = ...) -> None: ...
-
-class EvictGrant(_message.Message):
-    __slots__ = ("chunk", "token", "staged")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    STAGED_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    staged: _containers.RepeatedCompositeFieldContainer[StagedBatch]
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., staged: _Optional[_Iterable[_Union[StagedBatch, _Mapping]]] = ...) -> None: ...
-
-class EvictCommit(_message.Message):
-    __slots__ = ("chunk", "token", "dead", "apply", "drop")
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    TOKEN_FIELD_NUMBER: _ClassVar[int]
-    DEAD_FIELD_NUMBER: _ClassVar[int]
-    APPLY_FIELD_NUMBER: _ClassVar[int]
-    DROP_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    token: int
-    dead: _containers.RepeatedScalarFieldContainer[bytes]
-    apply: _containers.RepeatedCompositeFieldContainer[StagedBatch]
-    drop: _containers.RepeatedScalarFieldContainer[bytes]
-    def __init__(self, chunk: _Optional[bytes] = ..., token: _Optional[int] = ..., dead: _Optional[_Iterable[bytes]] = ..., apply: _Optional[_Iterable[_Union[StagedBatch, _Mapping]]] = ..., drop: _Optional[_Iterable[bytes]] = ...) -> None: ...
-
-class Evicted(_message.Message):
-    __slots__ = ("chunk",)
-    CHUNK_FIELD_NUMBER: _ClassVar[int]
-    chunk: bytes
-    def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
 
 class RaftEntry(_message.Message):
     __slots__ = ("term", "index", "kind", "data")
