@@ -5,17 +5,21 @@ world: the target T holds chunk A with a holder H, chunk B alone, and chunk C
 with a member M; each chunk holds a counter with a few commits of history. The
 fuzzer (`mapbench.fuzz_client`) sends T what `mapbench.hostile` makes,
 as strangers (unknown peer ids) and as M (a known member and a holder of C
-only), now and then a commit to C step by step (`commit_flow`), and sorts
+only), now and then a commit to C through T's log (`commit_flow`), and sorts
 every answer: each must be the one the message calls for, an `ErrorReply`
 saying "internal error" is a handler bug, and so is an ERROR line in a peer's
-log (but T's report that M's hash chain of C differs from its own: M may claim any).
+log (but T's report that M's hash chain of a chunk it holds differs from its own: M
+may claim any).
 
 Afterwards T must answer a Ping, H must commit to A through T (a real commit
 round trip), T's store must pass `PRAGMA integrity_check` and hold exactly the
 tables, chunks, holders, revisions and commits of A and B it held before. C may
 have changed, but only if T acknowledged a commit or a holder change for it
-(M holds C, so its messages about C are legitimate), and the whole store must
-still be consistent (`mapbench.store_check`). The fuzzer never speaks as
+(M holds C, so its messages about C are legitimate); the holders of A or B may
+change only if T acknowledged M joining or leaving it (in an open swarm a
+member may hold any chunk, and T cannot tell M's word from a forgery: a secure
+swarm authenticates peers); and the whole store must still be consistent
+(`mapbench.store_check`). The fuzzer never speaks as
 T or H: a peer cannot tell an impersonation from the real thing in an open
 swarm (a secure swarm authenticates peers with CurveZMQ).
 """
@@ -28,23 +32,26 @@ import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from mapapi._pb.mapapi.v1.types_pb2 import Counter
+from mapapi.core import codec
 from mapapi.core.errors import MapError
-from mapapi.core.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
+from mapapi.core.proposal import Proposal
+from mapapi.core.transaction import Change, Op
 from mapapi.lookup.dht.chord import key_bytes
 from mapapi.lookup.dht.ring import chunk_key, peer_key
 from mapapi.lookup.spatial import SpatialGrid
-from mapapi.net import messages
 from mapbench import store_check
-from mapbench.fuzz_client import Fuzzer
-from mapbench.hostile import Fix, Generator, Pools
+from mapbench.fuzz_client import Fuzzer, Outcome
+from mapbench.hostile import Generator, Pools
 from mapbench.workers import WorkerProcess, spawn_workers
 
 FLOW_EVERY = 20
-"""One message in this many starts a step-by-step commit (`commit_flow`)."""
+"""One message in this many is a commit through T's log (`commit_flow`)."""
 
 
 class FuzzFailed(MapError):
@@ -89,10 +96,11 @@ class Target:
 
     def logged_errors(self) -> list[str]:
         """ERROR lines the three peers logged (a handler that failed, a dead reader),
-        but for T saying that M's chain of C differs from its own: M holds C, so a
-        link it claims is a holder's word, and reporting it loudly is T's job."""
+        but for T saying that M's chain of a chunk differs from its own: M holds C
+        (and any chunk T took it in for), so a link it claims is a holder's word,
+        and reporting it loudly is T's job."""
         claimed = (
-            f"ERROR mapapi.swarm.chain_watch: chunk {ChunkId(self.chunks['C']).short}: ",
+            "ERROR mapapi.swarm.chain_watch: chunk ",
             f"differs from peer {PeerId(self.m.id).short}'s",
         )
         found = []
@@ -170,7 +178,7 @@ def fuzz_target(target: Target, messages_n: int, seed: int) -> dict[str, Any]:
     try:
         while fuzzer.outcome.messages < messages_n:
             if fuzzer.outcome.messages % FLOW_EVERY == 0:
-                commit_flow(generator, fuzzer, chunk, member)
+                commit_flow(generator, fuzzer, target, chunk, member)
             else:
                 fuzzer.send(generator.shot())
                 fuzzer.collect()
@@ -181,25 +189,34 @@ def fuzz_target(target: Target, messages_n: int, seed: int) -> dict[str, Any]:
         fuzzer.close()
 
 
-def commit_flow(generator: Generator, fuzzer: Fuzzer, chunk: bytes, member: bytes) -> None:
-    """One commit to `chunk` as `member` (a holder), step by step, each step valid
-    or not: lock, batch, apply or abort. It reaches the checks a holder makes of
-    a batch, which random messages never pass the lock to reach."""
-    grant = fuzzer.request(generator.lock(chunk, member))
-    if not isinstance(grant, messages.LockGrant):
-        return
-    shot, commit_id = generator.batch(chunk, grant.token, member)
-    fuzzer.request(shot)
-    fuzzer.request(generator.apply(chunk, grant.token, commit_id, member))
-    unlock = messages.Unlock(ChunkId.from_bytes(chunk), grant.token)  # if still held
-    fuzzer.request(generator.shot("unlock", "valid", sender=member, fix=_unlock(unlock)))
-
-
-def _unlock(body: messages.Unlock) -> Fix:
-    def fix(m: Any) -> None:
-        m.chunk, m.token = body.chunk.to_bytes(), body.token
-
-    return fix
+def commit_flow(
+    generator: Generator, fuzzer: Fuzzer, target: Target, chunk: bytes, member: bytes
+) -> None:
+    """One commit to `chunk` (C) as `member` (a holder), proposed to T (its leader)
+    with a real proposal, or one a hostile or broken writer would make: in another
+    peer's name, to an item of another chunk, of another table, a payload of
+    another type, a removal with a payload. It reaches the checks a leader makes
+    before an entry enters the log, which random bytes never pass the decoding to
+    reach."""
+    rnd, pools = generator.rnd, generator.pools
+    item = ItemId(target.items["C"])
+    data = Counter(name="c", value=rnd.randrange(100)).SerializeToString()
+    change = Change(Op.UPDATE, "counters", item, ChunkId.from_bytes(chunk), data)
+    how = rnd.choice(("valid", "valid", "author", "item", "table", "payload", "removal"))
+    author = PeerId.from_bytes(member if how != "author" else rnd.choice(pools.peers))
+    if how == "item":
+        change = replace(change, item_id=ItemId(target.items["A"]))
+    elif how == "table":
+        change = replace(change, table="fuzz")
+    elif how == "payload":
+        change = replace(change, data=rnd.randbytes(rnd.randrange(1, 40)))
+    elif how == "removal":
+        change = replace(change, op=Op.REMOVE)
+    proposal = Proposal(
+        CommitId.new(), pools.lamport + 1, author, "fuzz", "", how, pools.lamport, "snapshot",
+        (change,),
+    )  # fmt: skip
+    fuzzer.request(generator.propose(chunk, codec.encode_entry(proposal), member))
 
 
 def finish(
@@ -216,7 +233,7 @@ def finish(
     peer_ok = not crashed and fuzzer.ping()
     if not peer_ok:
         problems.append("T does not answer a Ping after the run")
-    store_problems = [] if crashed else _store_problems(target, before, out.changed)
+    store_problems = [] if crashed else _store_problems(target, before, out)
     if peer_ok:
         try:
             problems += check_round_trip(target)
@@ -250,13 +267,15 @@ def finish(
 
 
 def _store_problems(
-    target: Target, before: dict[str, list[tuple[Any, ...]]], changed: set[ChunkId]
+    target: Target, before: dict[str, list[tuple[Any, ...]]], out: Outcome
 ) -> list[str]:
     """Differences between T's store now and `before` that no acknowledged
-    message explains (only chunk C may change, and only if T acknowledged it)."""
+    message explains (only chunk C may change, and only if T acknowledged it;
+    the holders of a chunk, if T acknowledged a join or leave of it)."""
     after = store_check.snapshot(target.store)
-    may_change = {target.chunks["C"]} & {str(c) for c in changed}
-    return store_check.unexplained(before, after, may_change)
+    may_change = {target.chunks["C"]} & {str(c) for c in out.changed}
+    regrouped = {str(c) for c in out.regrouped}
+    return store_check.unexplained(before, after, may_change, regrouped)
 
 
 def check_fuzz(report: dict[str, Any]) -> None:

@@ -23,8 +23,8 @@ from mapapi.net.codec import Envelope, ErrorReply, Kind, Ping, Pong
 from mapbench.hostile import Pools, Shot
 
 REPLY_TIMEOUT = 90.0
-"""Seconds a request may wait for its reply: a lock request may queue (10 s) and a
-participation's transfer to an address that never answers times out (30 s)."""
+"""Seconds a request may wait for its reply: a proposal waits out an election or a
+busy chunk (5 s) and a join pings the joiner (2 s) and changes the members (5 s)."""
 
 WINDOW = 32
 """Requests in flight at once."""
@@ -32,40 +32,33 @@ WINDOW = 32
 _REPLIES: dict[type, type] = {
     Ping: Pong,
     messages.Hello: messages.Welcome,
-    messages.LockRequest: messages.LockGrant,
     messages.HoldersQuery: messages.Holders,
     messages.ChunkListQuery: messages.ChunkList,
     messages.ChordFindSuccessor: messages.ChordHop,
     messages.ChordGetNeighbours: messages.ChordNeighbours,
     messages.ChordGet: messages.ChordValues,
-    messages.CommitStatusQuery: messages.CommitStatus,
-    messages.EvictRequest: messages.EvictGrant,
     messages.ChainHead: messages.ChainHead,  # a holder's link, answered with ours
+    messages.RaftPropose: messages.RaftProposed,
+    messages.GroupJoin: messages.GroupChanged,
+    messages.GroupLeave: messages.GroupChanged,
 }
 """The reply of each request that is not answered with `Ack` (or an ErrorReply)."""
 
 _ACKED = (
     messages.Bye,
-    messages.Unlock,
-    messages.CommitBatch,
-    messages.CommitApply,
-    messages.CommitAbort,
-    messages.ParticipateRequest,
-    messages.ChunkPart,
-    messages.HolderChange,
+    messages.RaftBatch,
     messages.ChordNotify,
     messages.ChordLeave,
     messages.ChordAdd,
     messages.ChordRemove,
     messages.ChordStore,
     messages.TriggerPush,
-    messages.EvictCommit,
-    messages.Evicted,
 )
 
 
-_CHANGES = (messages.CommitApply, messages.HolderChange)
-"""The messages that change a holder's store (under the sender's lock)."""
+_CHANGES = (messages.RaftPropose, messages.GroupJoin, messages.GroupLeave)
+"""The requests that change a chunk's replica once answered: a commit (or floor)
+through its log, a holder joining or leaving its group."""
 
 
 @dataclass
@@ -90,6 +83,7 @@ class Outcome:
     by_body: dict[str, Tally[str]] = field(default_factory=dict)
     by_mode: Tally[str] = field(default_factory=Tally)
     changed: set[ChunkId] = field(default_factory=set)  # chunks T acknowledged a change to
+    regrouped: set[ChunkId] = field(default_factory=set)  # acknowledged joins and leaves
     problems: list[str] = field(default_factory=list)
 
     def count(self, body: str, what: str) -> None:
@@ -107,7 +101,7 @@ class Fuzzer:
 
     Args:
         address: the target's endpoint.
-        pools: updated with what the answers reveal (lock tokens, its clock).
+        pools: updated with what the answers reveal (its clock).
     """
 
     def __init__(self, address: str, pools: Pools) -> None:
@@ -137,6 +131,8 @@ class Fuzzer:
             out.count(shot.body, expect)
             if isinstance(body, _CHANGES):  # a notification may change it, unseen
                 out.changed.add(body.chunk)
+            if isinstance(body, messages.RaftBatch):  # a member's messages may, too
+                out.changed |= {m.chunk for m in body.messages}
         else:
             assert request_id is not None
             while request_id in self._pending or len(self._pending) >= WINDOW:
@@ -233,10 +229,12 @@ class Fuzzer:
             return
         out.valid_replies += 1
         out.count(name, "valid")
-        if isinstance(body, messages.LockGrant):
-            self.pools.learn_token(body.token)
         if isinstance(pending.body, _CHANGES):
             out.changed.add(pending.body.chunk)
+        if isinstance(pending.body, messages.GroupJoin | messages.GroupLeave):
+            out.regrouped.add(pending.body.chunk)
+        if isinstance(pending.body, messages.RaftBatch):  # a member's messages may change it
+            out.changed |= {m.chunk for m in pending.body.messages}
 
 
 def _expectation(frames: list[bytes]) -> tuple[int | None, object | None, str]:

@@ -5,9 +5,9 @@ field, so a message added to wire.proto is fuzzed without a line here) and
 fills each field by its name and type, in one of three modes:
 
 - "valid": values a real peer would send, drawn from `Pools` (the target's
-  real chunk, item and commit ids, peers, ring keys, addresses, lock tokens),
-  with embedded messages (holder entries, spatial entries, subscriptions, item
-  payloads) built the way the core builds them.
+  real chunk, item and commit ids, peers, ring keys, addresses), with embedded
+  messages (holder entries, spatial entries, subscriptions, item payloads, log
+  entries) built the way the core builds them.
 - "fields": the same, but each field may take a hostile value instead: ids of
   the wrong length, huge or zero counts and numbers, NaN and infinite floats,
   unknown enum values, long strings, random bytes, long repeated fields.
@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import random
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -34,7 +34,7 @@ from google.protobuf import struct_pb2
 from google.protobuf.descriptor import Descriptor, FieldDescriptor
 from google.protobuf.message import Message
 
-from mapapi._pb.mapapi.v1 import lookup_pb2, types_pb2, wire_pb2
+from mapapi._pb.mapapi.v1 import core_pb2, lookup_pb2, types_pb2, wire_pb2
 from mapapi.net.codec import Kind
 
 MODES = ("valid", "fields", "bytes")
@@ -71,14 +71,7 @@ class Pools:
     tables: list[str]
     type_names: list[str]
     index: str = ""  # the target's spatial index fingerprint (a Hello must carry it)
-    tokens: list[int] = field(default_factory=lambda: [1, 2, 3])
     lamport: int = 1
-
-    def learn_token(self, token: int) -> None:
-        """Remember a lock token the target granted (later messages may use it)."""
-        if token not in self.tokens:
-            self.tokens.append(token)
-            del self.tokens[:-16]
 
 
 @dataclass(frozen=True)
@@ -118,9 +111,9 @@ class Generator:
 
         Args:
             sender: the envelope's sender (default: one of `senders`).
-            fix: makes the filled body coherent (one chunk throughout, a current
-                lock token); in "fields" mode it is skipped now and then, so
-                the body keeps its hostile values.
+            fix: makes the filled body coherent (one chunk throughout, a real
+                proposal); in "fields" mode it is skipped now and then, so the
+                body keeps its hostile values.
         """
         rnd = self.rnd
         body = body or rnd.choice(BODIES)
@@ -149,40 +142,14 @@ class Generator:
         self._fill(getattr(env, body), 0)
         return env
 
-    # -- a commit, step by step (`mapbench.fuzz` sends them in turn) -----------------
-    def lock(self, chunk: bytes, sender: bytes) -> Shot:
-        """A valid request for `chunk`'s write lock."""
+    # -- a commit through the target's log (`mapbench.fuzz` builds the proposal) ------
+    def propose(self, chunk: bytes, proposal: bytes, sender: bytes) -> Shot:
+        """A `RaftPropose` of the encoded `proposal` to `chunk` (valid or not)."""
 
         def fix(m: Any) -> None:
-            m.chunk, m.token = chunk, 0
+            m.chunk, m.proposal = chunk, proposal
 
-        return self.shot("lock_request", "valid", sender=sender, fix=fix)
-
-    def batch(self, chunk: bytes, token: int, sender: bytes) -> tuple[Shot, bytes]:
-        """A commit batch for `chunk` under `token` (valid or not); its commit id."""
-        commit_id = self.rnd.randbytes(16)
-        time = self.pools.lamport + 1
-
-        def fix(m: Any) -> None:
-            m.chunk, m.token = chunk, token
-            m.record.id, m.record.time, m.record.author = commit_id, time, sender
-            m.record.chunks[:] = [chunk]
-            for r in m.revisions:
-                r.chunk_id, r.commit_id, r.update_time, r.author = chunk, commit_id, time, sender
-                r.insert_time = min(r.insert_time, time)
-                r.table = self.pools.tables[0]
-
-        mode = self.rnd.choice(MODES)
-        return self.shot("commit_batch", mode, sender=sender, fix=fix), commit_id
-
-    def apply(self, chunk: bytes, token: int, commit_id: bytes, sender: bytes) -> Shot:
-        """The apply (or now and then the abort) of a staged batch."""
-
-        def fix(m: Any) -> None:
-            m.chunk, m.token, m.commit_id = chunk, token, commit_id
-
-        body = self.rnd.choices(("commit_apply", "commit_abort"), weights=(4, 1))[0]
-        return self.shot(body, self.rnd.choice(MODES), sender=sender, fix=fix)
+        return self.shot("raft_propose", self.rnd.choice(MODES), sender=sender, fix=fix)
 
     # -- hostile choices -------------------------------------------------------------
     def _odd(self, value: Any, odd: tuple[Any, ...]) -> Any:
@@ -261,12 +228,8 @@ class Generator:
 
     def _plain_int(self, name: str) -> int:
         rnd, pools = self.rnd, self.pools
-        if name == "token":
-            return rnd.choice([0, *pools.tokens])
         if name in _TIME_FIELDS:
             return max(0, pools.lamport + rnd.randrange(-3, 4))
-        if name in ("part", "parts"):
-            return rnd.randrange(3)
         return rnd.randrange(100)
 
     def _plain_text(self, name: str) -> str:
@@ -343,4 +306,6 @@ _EMBEDDED: dict[str, tuple[Any, ...]] = {
     # NaN or infinite, `_ODD_FLOATS`), which no Counter table accepts: refused by
     # the commit check, never stored (issue 18: one value poisoned a table).
     "data": (types_pb2.Counter, types_pb2.Counter, struct_pb2.Struct),
+    # A chunk's log entry (`RaftPropose.proposal`): a proposal, a decision or a floor.
+    "proposal": (core_pb2.ChunkLogEntry,),
 }

@@ -72,8 +72,14 @@ def problems(path: Path) -> list[str]:
         return found
 
 
-def unexplained(before: Snapshot, after: Snapshot, may_change: Collection[str]) -> list[str]:
-    """What changed between two snapshots outside the chunks in `may_change`.
+def unexplained(
+    before: Snapshot,
+    after: Snapshot,
+    may_change: Collection[str],
+    regrouped: Collection[str] = (),
+) -> list[str]:
+    """What changed between two snapshots outside the chunks in `may_change`
+    (and, for their holders only, those in `regrouped`).
 
     Tables and chunks must be equal; holders and revisions of the other chunks
     equal; old commit records unchanged; new records only if a chunk may change.
@@ -84,15 +90,15 @@ def unexplained(before: Snapshot, after: Snapshot, may_change: Collection[str]) 
             found.append(f"the {table} table changed")
     # holders (chunk_id, peer_id); revisions (item_id, update_time, table, chunk_id, ...)
     for table, column in (("holders", 0), ("revisions", 3)):
-        old = [r for r in before[table] if r[column] not in may_change]
-        new = [r for r in after[table] if r[column] not in may_change]
+        free = set(may_change) | (set(regrouped) if table == "holders" else set())
+        old = [r for r in before[table] if r[column] not in free]
+        new = [r for r in after[table] if r[column] not in free]
         if old != new:
             found.append(f"{table} of chunks that may not change differ ({len(old)} -> {len(new)})")
     old_commits, new_commits = set(before["commits"]), set(after["commits"])
     if not old_commits <= new_commits:
         found.append(f"{len(old_commits - new_commits)} commit record(s) changed or vanished")
     if new_commits - old_commits and not may_change:
-        # A record comes with a batch applied under a chunk's lock (a batch that
-        # only locks a chunk a commit read brings its record without revisions).
+        # A record comes with a commit applied from a chunk's log.
         found.append(f"{len(new_commits - old_commits)} new commit record(s)")
     return found

@@ -58,7 +58,12 @@ async def change_members(
     me = node_id(groups.me)
     try:
         async with asyncio.timeout(timeout):
-            while (change := next_change(groups.config(chunk), wanted, factor, me)) is not None:
+            while next_change(groups.config(chunk), wanted, factor, me) is not None:
+                ready = groups.promotable(chunk)
+                change = next_change(groups.config(chunk), wanted, factor, me, ready)
+                if change is None:  # a learner to promote has not caught up yet
+                    await groups.progressed(chunk)
+                    continue
                 try:
                     await groups.propose_change(chunk, change, timeout)
                 except ProposalRefused:  # its own first entry, or a change still uncommitted
@@ -216,8 +221,9 @@ class GroupMembers:
             living = {self.groups.me, *members} - set(gone)
             wanted = {node_id(p) for p in living}
             me = node_id(self.groups.me)
-            if next_change(self.groups.config(chunk), wanted, self.factor, me) is None:
-                continue
+            ready = self.groups.promotable(chunk)
+            if next_change(self.groups.config(chunk), wanted, self.factor, me, ready) is None:
+                continue  # nothing to do, or only a learner to promote that lags
             try:
                 async with self._changing.setdefault(chunk, asyncio.Lock()):
                     await change_members(self.groups, chunk, living, self.factor)

@@ -26,7 +26,7 @@ from functools import partial
 
 from mapapi.core.errors import NotChunkLeader, PeerUnavailable, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
-from mapapi.net.messages import RaftBatch
+from mapapi.net.messages import Ack, RaftBatch
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
@@ -205,6 +205,12 @@ class RaftGroups:
         peers = (self._peer(n) for n in group.node.config.members if n != node_id(self.me))
         return [p for p in peers if p is not None]
 
+    def promotable(self, chunk: ChunkId) -> frozenset[int]:
+        """The node ids of the chunk's learners caught up with its log, as this
+        peer knows it leading the group (none otherwise): those `voters.next_change`
+        may promote."""
+        return self._group(chunk).node.caught_up_learners()
+
     def voters(self, chunk: ChunkId) -> list[PeerId]:
         """The voters of the chunk's group (this peer too, if it votes) that this
         peer can name.
@@ -262,7 +268,9 @@ class RaftGroups:
         return await self._await_entry(group, start, timeout)
 
     async def progressed(self, chunk: ChunkId) -> None:
-        """Until the chunk's group next applies entries here."""
+        """Until something next happens in the chunk's group here: entries applied,
+        or a member's messages stepped (a follower's answer moves the leader's view
+        of it). Callers check again what they wait for."""
         group = self._group(chunk)
         group.progress.clear()
         await group.progress.wait()
@@ -348,7 +356,7 @@ class RaftGroups:
                 self._process(group)
             self._flush()
 
-    def rpc_raft_batch(self, req: Request) -> None:
+    def rpc_raft_batch(self, req: Request) -> Ack:
         """Step every message of a batch into its group (unknown groups are skipped:
         a message may arrive before `join` or after the chunk was dropped).
 
@@ -357,7 +365,9 @@ class RaftGroups:
         would otherwise write its entries into the chunk. A peer that has joined
         and knows no configuration yet hears anyone (its leader is not known to
         it). The cost: a member that missed the change that added the current
-        leader drops the leader's messages until it joins again."""
+        leader drops the leader's messages until it joins again.
+
+        Peers send batches as notifications; one sent as a request gets an `Ack`."""
         batch: RaftBatch = req.body
         sender = node_id(req.sender)
         touched: dict[ChunkId, GroupState] = {}
@@ -381,7 +391,9 @@ class RaftGroups:
             touched[group.chunk] = group
         for group in touched.values():
             self._process(group)
+            group.progress.set()
         self._flush()
+        return Ack()
 
     def _process(self, group: GroupState) -> None:
         """Run the Ready loop of one group until it has nothing more to do."""

@@ -65,6 +65,20 @@ class Leader:
         voters = sorted(self.config.voters - {self.id})
         return [n for n in voters if n in self._progress and self._progress[n].match < index]
 
+    def caught_up_learners(self) -> frozenset[int]:
+        """The learners that, as far as this leader knows, hold every committed entry
+        (none when this node does not lead): those it may promote to voters (thesis
+        §4.2.1: a new server catches up before it counts, so a member that never
+        answers never gets a vote)."""
+        if self.role is not Role.LEADER:
+            return frozenset()
+        committed = self.log.committed
+        return frozenset(
+            n
+            for n in self.config.learners
+            if n in self._progress and self._progress[n].match >= committed
+        )
+
     # -- leader (paper §5.3) -----------------------------------------------------------------
 
     def _tick_leader(self) -> None:

@@ -16,7 +16,9 @@ Order, so that a group keeps as many working voters as it can:
    they cost nothing; a dead voter is removed before anything is added);
 2. add new holders as learners (they catch up without counting in quorums);
 3. promote learners until the voters reach the target (lowest id first, so
-   every leader picks the same);
+   every leader picks the same), only those caught up with the log: a member
+   that never answers never votes; and from an odd number of voters only when
+   two are ready, so the voters never stay even waiting for a laggard;
 4. retire surplus voters (a voter cannot be demoted in place: it is removed,
    and step 2 adds it back as a learner).
 """
@@ -49,14 +51,17 @@ def next_change(
     holders: Collection[int],
     factor: int = DEFAULT_REPLICATION,
     leader: int | None = None,
+    promotable: Collection[int] | None = None,
 ) -> ConfChange | None:
     """The next single-server change that brings `config` to `holders` with the
-    right number of voters, or None when it is there (see the module docstring).
+    right number of voters, or None when it is there, or waits for a learner to
+    catch up (see the module docstring).
 
     Args:
         holders: the node ids that should hold the chunk.
         leader: the proposing leader, which retires itself last (it would step
             down, and a new leader would have to finish the work).
+        promotable: the learners caught up with the log (None: every learner).
     """
     wanted = set(holders)
     for node in sorted(config.learners - wanted) + sorted(config.voters - wanted):
@@ -66,7 +71,9 @@ def next_change(
         return ConfChange(ConfChangeKind.ADD_LEARNER, node)
     target = voter_target(len(wanted & config.members), factor)
     if len(config.voters) < target:
-        return ConfChange(ConfChangeKind.ADD_VOTER, min(config.learners))
+        ready = config.learners if promotable is None else config.learners & set(promotable)
+        needed = 2 if len(config.voters) % 2 else 1  # the next odd count, or nothing
+        return ConfChange(ConfChangeKind.ADD_VOTER, min(ready)) if len(ready) >= needed else None
     if len(config.voters) > target:
         surplus = sorted(config.voters - {leader}, reverse=True)
         return ConfChange(ConfChangeKind.REMOVE_NODE, surplus[0])

@@ -4,10 +4,11 @@ A real peer process (with a holder and a member, `mapbench.fuzz.target_swarm`)
 receives messages of every body type from a real zmq socket, as strangers and
 as a member: valid, with hostile fields (wrong id lengths, huge counts and
 numbers, NaN, unknown enum values, random bytes) or broken as bytes (bit
-flips, truncations), plus commits step by step. Hypothesis draws each
+flips, truncations), plus commits through the target's log (real
+proposals, or ones a hostile writer would make). Hypothesis draws each
 example's body type, mode and the seed of the generator
 (`mapbench.hostile`) that fills the fields; the target's answers steer
-later messages (lock tokens), so the fields are not drawn by hypothesis
+later messages (its clock), so the fields are not drawn by hypothesis
 itself, whose replays must not depend on outside state. Each example's answers are checked as
 they arrive (an "internal error" reply or a wrong reply fails it); after all
 examples the peer must answer a Ping and a commit through it, and its store
@@ -71,13 +72,13 @@ def test_hostile_messages_never_hurt_the_peer(
     def one_batch(body: str, mode: str, flow: bool, seed: int) -> None:
         out = fuzzer.outcome
         bad = out.internal_errors + out.wrong_replies
-        waiting = fuzzer.in_flight  # slow ones of earlier examples (a lock that queues)
+        waiting = fuzzer.in_flight  # slow ones of earlier examples (a proposal, a join)
         generator = Generator(random.Random(seed), pools, senders)
         fuzzer.send(generator.shot(body, mode))
         for _ in range(PER_EXAMPLE - 1):
             fuzzer.send(generator.shot())
         if flow:
-            commit_flow(generator, fuzzer, chunk, member)
+            commit_flow(generator, fuzzer, target, chunk, member)
         end = time.monotonic() + ANSWER_WAIT
         while fuzzer.in_flight > waiting and time.monotonic() < end:
             fuzzer.collect(0.05)

@@ -384,6 +384,17 @@ class TestMembership:
         net.elect(1)  # only the learner answers
         assert net.nodes[1].role is not Role.LEADER
 
+    def test_only_a_learner_that_caught_up_may_be_promoted(self) -> None:
+        net = Network(voters=1, learners=(2, 3))
+        net.elect(1)
+        net.isolate(3)
+        net.propose(1, b"x")
+        assert net.nodes[1].caught_up_learners() == {2}  # 3 never answered
+        assert net.nodes[2].caught_up_learners() == frozenset()  # a learner names nobody
+        net.heal()
+        net.tick(1, 1)
+        assert net.nodes[1].caught_up_learners() == {2, 3}
+
     def test_new_node_joins_as_learner_and_is_promoted(self) -> None:
         net = Network()
         net.elect(1)

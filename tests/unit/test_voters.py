@@ -80,3 +80,16 @@ def test_changes_converge_to_the_holders_with_odd_voters(
         assert not current.voters & holders
     else:
         assert len(current.voters) == voter_target(len(holders), factor)
+
+
+def test_a_learner_is_promoted_only_once_it_caught_up() -> None:
+    config = Config(frozenset({1}), frozenset({2, 3}))
+    assert next_change(config, {1, 2, 3}, promotable=set()) is None  # wait for them
+    assert next_change(config, {1, 2, 3}, promotable={3}) is None  # 2 voters, stuck: no
+    assert next_change(config, {1, 2, 3}, promotable={2, 3}) == ConfChange(
+        ConfChangeKind.ADD_VOTER, 2
+    )
+    halfway = Config(frozenset({1, 2}), frozenset({3}))
+    assert next_change(halfway, {1, 2, 3}, promotable={3}) == ConfChange(
+        ConfChangeKind.ADD_VOTER, 3
+    )
