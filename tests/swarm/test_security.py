@@ -18,15 +18,15 @@ import pytest
 
 from mapapi import Peer, PeerId
 from mapapi.core.errors import AccessRefused
-from mapapi.core.ids import CommitId
 from mapapi.net import codec
 from mapapi.net.codec import Envelope, ErrorReply, Kind
 from mapapi.net.messages import (
     ChunkList,
     ChunkListQuery,
-    CommitApply,
+    GroupJoin,
+    GroupLeave,
     Hello,
-    LockRequest,
+    HoldersQuery,
     Member,
     RaftPropose,
 )
@@ -345,7 +345,7 @@ class TestIdentityIsTheKey:
         assert peer.id == peer_id_of(keys_of(peer).keys.public)
         assert keys_of(peer).peer_id == peer.id
 
-    async def test_a_trusted_peer_cannot_lock_or_commit_as_another(
+    async def test_a_trusted_peer_cannot_commit_or_join_as_another(
         self, make_peer: MakePeer, caplog: pytest.LogCaptureFixture
     ) -> None:
         s1, s2, rogue = await secure_swarm(make_peer, 3)
@@ -354,22 +354,23 @@ class TestIdentityIsTheKey:
         before = await log_ids(s1)
         stats = net(s1).rpc.transport.stats
         forged = [
-            LockRequest(chunk),
-            CommitApply(chunk, 1, CommitId.new()),
             RaftPropose(chunk, b"\x00" * 16),
+            GroupJoin(chunk),
+            GroupLeave(chunk),
         ]
         async with hostile(keys_of(rogue), s1.address) as client:
             for body in forged:
                 reply = await client.ask(s2.id, body)
                 assert refused(reply), f"{type(body).__name__} as s2 was {reply.body}"
             # the same connection under its own id is served: the key is why
-            own = await client.ask(rogue.id, LockRequest(chunk))
+            own = await client.ask(rogue.id, HoldersQuery(chunk, None))
             assert not refused(own)
         assert stats.dropped_count("forged") == len(forged)
         warnings = [r.getMessage() for r in caplog.records if "claiming to be peer" in r.message]
         assert any(str(s2.id) in w and key_text(keys_of(rogue).keys.public) in w for w in warnings)
         assert await log_ids(s1) == before  # nothing applied
         assert await log_ids(s2) == before
+        assert set(s1.holders(chunk)) == {s1.id, s2.id}  # nobody joined or left
 
     async def test_a_bound_id_is_accepted_and_only_from_its_key(
         self,
