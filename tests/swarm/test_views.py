@@ -14,7 +14,7 @@ from collections.abc import Awaitable, Callable
 
 import pytest
 
-from mapapi import ConflictError, Peer
+from mapapi import ChunkId, ConflictError, ItemId, Peer
 from mapapi.net.shaping import LinkShape, Shaper
 from tests.swarm.conftest import TABLE, Counter, counter_chunk, share, value
 
@@ -31,6 +31,17 @@ async def writer_and_reader(make_peer: Callable[..., Awaitable[Peer]]) -> tuple[
     return writer, reader
 
 
+async def shared_counter(
+    make_peer: Callable[..., Awaitable[Peer]],
+) -> tuple[Peer, Peer, ChunkId, ItemId]:
+    """A writer holding a counter at 0 (its chunk's voter) and a reader holding it
+    too (a learner)."""
+    writer, reader = await writer_and_reader(make_peer)
+    chunk, item = await counter_chunk(writer, 0)
+    await share(chunk, [reader])
+    return writer, reader, chunk, item
+
+
 async def set_counter(peer: Peer, item: object, to: int) -> int:
     """Commit the counter `item` at `to` on `peer`, blind; the commit's time."""
     tx = peer.begin()
@@ -43,9 +54,7 @@ async def set_counter(peer: Peer, item: object, to: int) -> int:
 async def test_a_view_begun_after_a_commit_elsewhere_reads_it(
     make_peer: Callable[..., Awaitable[Peer]],
 ) -> None:
-    writer, reader = await writer_and_reader(make_peer)
-    chunk, item = await counter_chunk(writer, 0)
-    await share(chunk, [reader])  # the writer votes, the reader is a learner
+    writer, reader, _, item = await shared_counter(make_peer)
     for to in (1, 2, 3):
         committed = await set_counter(writer, item, to)
         # acknowledged before the reader applied it (or heard of its time)
@@ -85,9 +94,7 @@ async def test_a_view_that_has_read_stays_at_its_time(
 async def test_a_view_that_wrote_first_keeps_its_time(
     make_peer: Callable[..., Awaitable[Peer]],
 ) -> None:
-    writer, reader = await writer_and_reader(make_peer)
-    chunk, item = await counter_chunk(writer, 0)
-    await share(chunk, [reader])
+    writer, reader, chunk, item = await shared_counter(make_peer)
     view = reader.begin()
     begun = view.begin_time
     view.insert(TABLE, Counter(name="e", value=0), chunk)
@@ -99,9 +106,7 @@ async def test_a_view_that_wrote_first_keeps_its_time(
 async def test_a_view_at_a_given_time_never_moves(
     make_peer: Callable[..., Awaitable[Peer]],
 ) -> None:
-    writer, reader = await writer_and_reader(make_peer)
-    chunk, item = await counter_chunk(writer, 0)
-    await share(chunk, [reader])
+    writer, reader, _, item = await shared_counter(make_peer)
     assert await value(reader, item) == 0
     then = reader.now()
     await set_counter(writer, item, 1)
