@@ -9,8 +9,12 @@ peer daemon through the environment, `MAPAPI_FAULTS="commit.staged=pause"`
   can `kill -9` the process at exactly that moment of a commit;
 - ``crash``: kill the process with SIGKILL on the spot.
 
-The points: ``commit.staged`` (every holder staged the batches; nothing is
-applied anywhere) and ``commit.applied`` (applied at the writer only).
+The points, both on the writer's side of a commit through the chunks' logs
+(`swarm/log_commit.py`): ``commit.acknowledged`` (the chunk's log took the
+commit: a majority of its voters hold it; the writer has not answered its
+caller) and ``commit.prepared`` (every chunk of a multi-chunk transaction
+holds its prepare; no decision is proposed yet, so the chunks' leaders settle
+it from the first chunk's log, `swarm/tx_recovery.py`).
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from mapapi.core.errors import UsageError
 
 log = logging.getLogger(__name__)
 
-POINTS = ("commit.staged", "commit.applied")
+POINTS = ("commit.acknowledged", "commit.prepared")
 ENV = "MAPAPI_FAULTS"
 
 Action = Callable[[], Awaitable[None]]

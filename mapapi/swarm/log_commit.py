@@ -40,6 +40,7 @@ from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
 from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
+from mapapi.swarm import faults
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.commit_check import CommitRule, check_proposal
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
@@ -121,6 +122,8 @@ class LogCommits:
         if len(chunks) < 2:
             (chunk,) = chunks
             outcome = await self.propose(chunk, Proposal.of(tx, chunk, message, self.clock.tick()))
+            if outcome.record is not None:
+                await faults.reached("commit.acknowledged")
             return await self._done(tx, self._raise_failure(chunk, outcome, tx))
         time, commit_id = self.clock.tick(), CommitId.new()
         machine = TwoPhase(
@@ -191,6 +194,8 @@ class LogCommits:
         decided: list[Outcome] = []
         step = machine.start()
         while step:
+            if any(isinstance(e, TxDecision) and e.commit for _, e in step):
+                await faults.reached("commit.prepared")
             answers = await asyncio.gather(*(self._answer(c, e) for c, e in step))
             step = []
             for chunk, answer, outcome in answers:
