@@ -7,6 +7,7 @@ for blocking scripts. `mapctl` imports only what this module exports.
 """
 
 from mapapi.app import attach, memory_peer, open_peer, operations, peer_of, run_daemon, start_daemon
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.errors import (
     AlreadyInitialisedError,
     ChunkBusy,
@@ -34,7 +35,7 @@ from mapapi.core.errors import (
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.table import TableDescriptor
-from mapapi.core.transaction import Change, Conflict, Op, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.core.view import mapctl_in
 from mapapi.lookup.spatial import BBox, SpatialGrid
 from mapapi.maps.schema import MISSIONS, Mission

@@ -38,10 +38,10 @@ from typing import Any
 
 from mapapi._pb.mapapi.v1.types_pb2 import Counter
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import MapError
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Op
 from mapapi.lookup.dht.chord import key_bytes
 from mapapi.lookup.dht.ring import chunk_key, peer_key
 from mapapi.lookup.spatial import SpatialGrid

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.ids import CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Op
 from mapapi.core.view import Scope
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.apply import Outcome

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.ids import ChunkId, CommitId, PeerId
 from mapapi.core.proposal import LogEntry, Proposal, TxDecision
-from mapapi.core.transaction import Change, Op
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.apply_tx import applier
 from mapapi.swarm.raft_types import Entry, EntryKind

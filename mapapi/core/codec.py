@@ -16,12 +16,13 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.chunk_state import ChunkState, TxState
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
-from mapapi.core.transaction import Change, Conflict, Isolation, Op
+from mapapi.core.transaction import Isolation
 from mapapi.core.view import Scope, View
 
 _GENERATED = (core_pb2, maps_pb2, types_pb2)  # registers every mapapi.v1 type

@@ -23,8 +23,9 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 if TYPE_CHECKING:
+    from mapapi.core.change import Conflict
     from mapapi.core.ids import ChunkId, PeerId
-    from mapapi.core.transaction import Conflict, Transaction
+    from mapapi.core.transaction import Transaction
 
 
 ADVICE_VERBS = ("retry now", "wait", "act")

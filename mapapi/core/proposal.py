@@ -17,8 +17,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from mapapi.core.change import Change
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.transaction import Change, Isolation, Transaction
+from mapapi.core.transaction import Isolation, Transaction
 from mapapi.core.view import Scope
 
 

@@ -10,11 +10,11 @@ exists; with `isolation="serializable"` the read set is validated too.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable
 from enum import Enum
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import ConflictError, ItemNotFound, UsageError, ViewClosedError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId, PeerId
@@ -26,48 +26,6 @@ if TYPE_CHECKING:
 
 Isolation = Literal["snapshot", "serializable"]
 ISOLATIONS: tuple[Isolation, ...] = ("snapshot", "serializable")
-
-
-class Op(Enum):
-    """What a buffered change does to its item."""
-
-    INSERT = 1
-    UPDATE = 2
-    REMOVE = 3
-
-
-@dataclass(frozen=True, slots=True)
-class Change:
-    """One buffered change; `data` is the serialized payload (empty for REMOVE)."""
-
-    op: Op
-    table: str
-    item_id: ItemId
-    chunk_id: ChunkId
-    data: bytes = b""
-
-
-@dataclass(frozen=True, slots=True)
-class Conflict:
-    """An item someone else changed after our begin time.
-
-    Attributes:
-        base: the item at our begin time (None if it did not exist).
-        ours: our change (None when only read, under serializable isolation).
-        theirs: the newest revision, written by the other side.
-    """
-
-    table: str
-    item_id: ItemId
-    chunk_id: ChunkId
-    base: Revision | None
-    ours: Change | None
-    theirs: Revision
-
-
-# Given our change, their newest revision and the base, return the merged
-# payload, or None when the table's policy cannot merge them.
-MergeFn = Callable[[Change, Revision, Revision | None], bytes | None]
 
 
 class TransactionBackend(Protocol):

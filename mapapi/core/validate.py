@@ -9,9 +9,9 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import replace
 
+from mapapi.core.change import Change, Conflict, MergeFn, Op
 from mapapi.core.history import Revision
 from mapapi.core.ids import CommitId, ItemId, PeerId
-from mapapi.core.transaction import Change, Conflict, MergeFn, Op
 
 
 def validate(

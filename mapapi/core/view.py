@@ -10,8 +10,9 @@ import shlex
 from dataclasses import dataclass, field
 from typing import Literal
 
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.ids import ChunkId, ItemId
-from mapapi.core.transaction import Change, Conflict, Isolation, Op
+from mapapi.core.transaction import Isolation
 
 Scope = tuple[str, ChunkId | None]
 Side = Literal["ours", "theirs"]

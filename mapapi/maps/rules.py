@@ -28,9 +28,9 @@ from mapapi.maps.errors import MissionRuleError
 from mapapi.maps.schema import EDGES, VERTICES, Edge, Vertex
 
 if TYPE_CHECKING:
+    from mapapi.core.change import Change
     from mapapi.core.history import Revision
     from mapapi.core.ids import ChunkId, ItemId
-    from mapapi.core.transaction import Change
     from mapapi.store.base import Store
     from mapapi.swarm.commit_check import CommitRule
 

@@ -25,9 +25,9 @@ from google.protobuf.message import DecodeError
 from mapapi._pb.mapapi.v1 import wire_pb2
 from mapapi.core import codec as storage
 from mapapi.core import limits
+from mapapi.core.change import Conflict
 from mapapi.core.errors import ConflictError, LimitExceeded, MapError, ProtocolError
 from mapapi.core.ids import PeerId
-from mapapi.core.transaction import Conflict
 from mapapi.net import fields, messages, raft_codec
 from mapapi.net.messages import RaftBatch
 

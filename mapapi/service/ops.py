@@ -24,17 +24,17 @@ from collections.abc import Awaitable, Callable, Iterable, Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Protocol
 
+from mapapi.core.change import Op
 from mapapi.core.errors import CorruptPayload, PeerNotRunning, UsageError
 from mapapi.core.history import CommitRecord, change_kind, number_commits
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.limits import PEER_ADDRESS
 from mapapi.core.table import check_new_table
-from mapapi.core.transaction import Op
 from mapapi.store.file_check import locate_payload
 
 if TYPE_CHECKING:
+    from mapapi.core.change import Change, Conflict
     from mapapi.core.history import Revision
-    from mapapi.core.transaction import Change, Conflict
     from mapapi.service.loop_lag import LoopLag
     from mapapi.service.peer import Peer
     from mapapi.store.base import IdKind

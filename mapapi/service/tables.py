@@ -12,9 +12,9 @@ from mapapi.core.table import TableDescriptor
 if TYPE_CHECKING:
     from google.protobuf.message import Message
 
+    from mapapi.core.change import Change
     from mapapi.core.history import Revision
     from mapapi.core.merge import MergePolicy
-    from mapapi.core.transaction import Change
     from mapapi.store.base import ReplicaStore
 
 

@@ -20,7 +20,7 @@ from mapapi.service.ops import (
 )
 
 if TYPE_CHECKING:
-    from mapapi.core.transaction import Conflict
+    from mapapi.core.change import Conflict
     from mapapi.service.peer import Peer
     from mapapi.service.workspace import View, Workspace
 

@@ -27,10 +27,10 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from mapapi.core.change import Change, Conflict
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.proposal import Proposal, TxDecision
-from mapapi.core.transaction import Change, Conflict
 from mapapi.core.validate import build_revisions, validate
 from mapapi.core.view import Scope
 from mapapi.store.base import ReplicaStore, Store

@@ -48,6 +48,20 @@ Address = Callable[[PeerId], str]
 """Where a peer is reached now (raises a MapError when it is not known)."""
 
 
+def shared(store: ReplicaStore, me: PeerId) -> tuple[Chunks, Peers]:
+    """The chunks `me` holds with others in `store`, and a chunk's other holders
+    (none if `me` does not hold it), as a `ChainWatch` of that peer asks for them."""
+
+    def chunks() -> list[ChunkId]:
+        return [c for c, hs in store.holdings().items() if me in hs and len(hs) > 1]
+
+    def peers(chunk: ChunkId) -> list[PeerId]:
+        holders = store.holders(chunk)
+        return [p for p in holders if p != me] if me in holders else []
+
+    return chunks, peers
+
+
 class ChainWatch:
     """Compares this peer's chains with the other holders' (see the module docstring).
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from mapapi.core.change import Change, Conflict, MergeFn
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import (
     ConflictError,
@@ -17,7 +18,7 @@ from mapapi.core.errors import (
 )
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import CommitId, ItemId, PeerId
-from mapapi.core.transaction import Change, Conflict, MergeFn, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.core.validate import build_revisions, validate
 from mapapi.store.base import ReplicaStore, Store
 from mapapi.swarm import apply

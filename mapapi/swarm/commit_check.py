@@ -18,11 +18,11 @@ from collections.abc import Collection, Sequence
 from typing import Protocol
 
 from mapapi.core import codec, limits
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import NotParticipatingError, UsageError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.core.proposal import LogEntry, Proposal, TxDecision
 from mapapi.core.table import TableDescriptor
-from mapapi.core.transaction import Change, Op
 from mapapi.store.base import ReplicaStore, Store
 
 

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from mapapi.core.errors import ProposalLost, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
@@ -17,7 +18,10 @@ from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_types import NONE, Entry, EntryKind, Ready, Role
-from mapapi.swarm.raft_wire import rows
+from mapapi.swarm.raft_wire import from_wire, node_id, rows
+
+if TYPE_CHECKING:
+    from mapapi.net.messages import RaftMessage
 
 log = logging.getLogger(__name__)
 
@@ -150,3 +154,44 @@ def apply_committed(
                 store.raft_applied(group.chunk, entry.index, applied.time)
         store.raft_applied(group.chunk, entries[-1].index)
     group.settle(entries, results)
+
+
+def step_batch(
+    groups: Mapping[ChunkId, GroupState],
+    me: int,
+    sender: PeerId,
+    messages: Iterable[RaftMessage],
+) -> list[GroupState]:
+    """Step the messages of one batch from `sender` into their groups here; the
+    groups they reached. A message to a group this peer does not have is skipped
+    (it may arrive before `join` or after the chunk was dropped), and so is one
+    that is not the sender's own, or malformed.
+
+    Only a member of a group, as this peer's configuration knows it, speaks in it:
+    Raft trusts its members, and a stranger's append with a higher term would
+    otherwise write its entries into the chunk. A peer that has joined and knows
+    no configuration yet hears anyone (its leader is not known to it). The cost: a
+    member that missed the change that added the current leader drops the
+    leader's messages until it joins again.
+    """
+    node = node_id(sender)
+    touched: dict[ChunkId, GroupState] = {}
+    for wire in messages:
+        group = groups.get(wire.chunk)
+        if group is None or wire.to != me:
+            continue
+        if wire.sender != node:  # a node speaks only for itself
+            log.warning("refused a raft message of node %d from %s", wire.sender, sender)
+            continue
+        members = group.node.config.members
+        if members and node not in members:
+            log.debug("chunk %s: no member sent %s", wire.chunk.short, sender.short)
+            continue
+        try:
+            message = from_wire(wire)
+        except ValueError as exc:
+            log.warning("refused a malformed raft message from %s: %s", sender.short, exc)
+            continue
+        group.node.step(message)
+        touched[group.chunk] = group
+    return list(touched.values())

@@ -40,6 +40,7 @@ from mapapi.swarm.group_state import (
     install,
     not_committed,
     persist,
+    step_batch,
 )
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_mail import RaftMail
@@ -52,7 +53,7 @@ from mapapi.swarm.raft_types import (
     RaftOptions,
     Role,
 )
-from mapapi.swarm.raft_wire import from_wire, node_id, rows, state_of
+from mapapi.swarm.raft_wire import node_id, rows, state_of
 
 log = logging.getLogger(__name__)
 
@@ -211,16 +212,6 @@ class RaftGroups:
         may promote."""
         return self._group(chunk).node.caught_up_learners()
 
-    def voters(self, chunk: ChunkId) -> list[PeerId]:
-        """The voters of the chunk's group (this peer too, if it votes) that this
-        peer can name.
-
-        Raises:
-            NotChunkLeader: this peer is not a member of the chunk's group.
-        """
-        voters = (self._peer(n) for n in self._group(chunk).node.config.voters)
-        return [p for p in voters if p is not None]
-
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
         kept = self.store.raft_load(chunk)
@@ -357,39 +348,11 @@ class RaftGroups:
             self._flush()
 
     def rpc_raft_batch(self, req: Request) -> Ack:
-        """Step every message of a batch into its group (unknown groups are skipped:
-        a message may arrive before `join` or after the chunk was dropped).
-
-        Only a member of the group, as this peer's configuration knows it, speaks
-        in it: Raft trusts its members, and a stranger's append with a higher term
-        would otherwise write its entries into the chunk. A peer that has joined
-        and knows no configuration yet hears anyone (its leader is not known to
-        it). The cost: a member that missed the change that added the current
-        leader drops the leader's messages until it joins again.
-
-        Peers send batches as notifications; one sent as a request gets an `Ack`."""
-        batch: RaftBatch = req.body
-        sender = node_id(req.sender)
-        touched: dict[ChunkId, GroupState] = {}
-        for wire in batch.messages:
-            group = self._groups.get(wire.chunk)
-            if group is None or wire.to != node_id(self.me):
-                continue
-            if wire.sender != sender:  # a node speaks only for itself
-                log.warning("refused a raft message of node %d from %s", wire.sender, req.sender)
-                continue
-            members = group.node.config.members
-            if members and sender not in members:
-                log.debug("chunk %s: no member sent %s", wire.chunk.short, req.sender.short)
-                continue
-            try:
-                message = from_wire(wire)
-            except ValueError as exc:
-                log.warning("refused a malformed raft message from %s: %s", req.sender.short, exc)
-                continue
-            group.node.step(message)
-            touched[group.chunk] = group
-        for group in touched.values():
+        """Step every message of a batch into its group (`group_state.step_batch`),
+        then run their Ready loops. Peers send batches as notifications; one sent
+        as a request gets an `Ack`."""
+        body: RaftBatch = req.body
+        for group in step_batch(self._groups, node_id(self.me), req.sender, body.messages):
             self._process(group)
             group.progress.set()
         self._flush()

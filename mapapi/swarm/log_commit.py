@@ -308,7 +308,7 @@ class LogCommits:
         if self._answers is None:
             return error
         try:
-            voters = self.groups.voters(chunk)
+            voters = self.groups.mail.peers(self.groups.config(chunk).voters)
         except NotChunkLeader:  # not a member (any more)
             return error
         down = [p for p in voters if p != self.groups.me and not self._answers(p)]

@@ -38,9 +38,10 @@ from mapapi.net.transport import ZmqTransport
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.apply_tx import applier
-from mapapi.swarm.chain_watch import ChainWatch
+from mapapi.swarm.chain_watch import ChainWatch, shared
 from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.commit_check import CommitRule
+from mapapi.swarm.final_reads import FinalReads
 from mapapi.swarm.group_members import GroupMembers
 from mapapi.swarm.groups import Applied, RaftGroups
 from mapapi.swarm.liveness import Liveness, LivenessOptions
@@ -141,7 +142,7 @@ class Swarm:
             remove_after=self.liveness.options.remove_after,
         )
         self._decide = applier(store)
-        self._closed: dict[ChunkId, int] = {}  # chunk -> the time up to which reads are final
+        self.reads = FinalReads(self.log, store)  # what views read is final
         self.replicator = Replicator(
             self.rpc,
             self.members,
@@ -157,9 +158,7 @@ class Swarm:
         )
         self._reaper: asyncio.Task[None] | None = None
         self._store = store
-        self.chains = ChainWatch(
-            store, self.rpc, self.members.address, self._shared_chunks, self._other_holders
-        )
+        self.chains = ChainWatch(store, self.rpc, self.members.address, *shared(store, peer_id))
         self.rpc.register(Hello, self.rpc_hello)
         self.rpc.register(Bye, self.rpc_bye)
         self.rpc.register(Ping, lambda req: Pong(req.body.payload))
@@ -182,31 +181,6 @@ class Swarm:
                 self._on_applied(outcome.record, outcome.revisions)
         return applied
 
-    async def read_at(self, chunk: ChunkId, time: int) -> None:
-        """Make this replica of `chunk` final up to `time` before a view reads it
-        there (`LogCommits.read_at`: caught up with the leader, and no later commit
-        stamped at or before `time`); once done for a time, later reads at or
-        before it need nothing more."""
-        if self._closed.get(chunk, -1) >= time or not self.replicator.holds(chunk):
-            return
-        await self.log.read_at(chunk, time)
-        self._closed[chunk] = max(self._closed.get(chunk, -1), time)
-
-    async def caught_up(self, chunk: ChunkId) -> int:
-        """Catch this replica of `chunk` up with its leader, as a view begun now
-        needs to see every commit acknowledged before (ReadIndex); returns the
-        chunk's clock then, up to which its reads are final.
-
-        Raises:
-            NotChunkLeader: no leader was known in time.
-            RequestTimeout: the leader could not confirm in time.
-        """
-        if not self.replicator.holds(chunk):
-            return self._store.raft_time(chunk)
-        time = await self.log.caught_up(chunk)
-        self._closed[chunk] = max(self._closed.get(chunk, -1), time)
-        return time
-
     def ensure_group(self, chunk: ChunkId) -> None:
         """Found a group of one for a chunk this peer holds alone and that has none
         (created here, or held since before it ran on the network)."""
@@ -222,16 +196,6 @@ class Swarm:
             await asyncio.sleep(every)
             now = asyncio.get_running_loop().time()
             await self.group_members.reap(self.liveness.is_dead, now)
-
-    def _shared_chunks(self) -> list[ChunkId]:
-        """The chunks this peer holds with others (their chains are compared)."""
-        me = self._peer_id
-        return [c for c, hs in self._store.holdings().items() if me in hs and len(hs) > 1]
-
-    def _other_holders(self, chunk: ChunkId) -> list[PeerId]:
-        """The other holders of a chunk this peer holds (none if it does not)."""
-        holders = self._store.holders(chunk)
-        return [p for p in holders if p != self._peer_id] if self._peer_id in holders else []
 
     @property
     def address(self) -> str:
@@ -394,7 +358,7 @@ class Swarm:
         for chunk in back:
             await self.replicator.register(chunk)
             try:  # compared once caught up: a replica behind is a prefix of any history
-                await self.caught_up(chunk)
+                await self.reads.caught_up(chunk)
             except MapError as exc:
                 log.warning("chunk %s has not caught up yet: %s", chunk.short, exc)
         await self.chains.compare(back)

@@ -1,6 +1,6 @@
 """Reading a peer's map in a swarm: a chunk not held here is fetched first (its
 holders found by asking the members), and a read of a chunk at a time first
-makes the replica final up to that time (`Swarm.read_at`: caught up with the
+makes the replica final up to that time (`FinalReads.read_at`: caught up with the
 chunk's leader, and no later commit stamped at or before it; DESIGN §13).
 Alone (no swarm), reads go straight to the store.
 
@@ -33,7 +33,7 @@ async def read(
         return store.read(item_id, time)
     chunk = await _item_chunk(store, swarm, item_id)
     if chunk is not None:
-        await swarm.read_at(chunk, time)
+        await swarm.reads.read_at(chunk, time)
     return store.read(item_id, time)
 
 
@@ -44,7 +44,7 @@ async def scan(
     fetched first."""
     if swarm is not None:
         for each in await _scope_chunks(store, swarm, table, chunk):
-            await swarm.read_at(each, time)
+            await swarm.reads.read_at(each, time)
     return store.scan(time, table=table, chunk=chunk)
 
 
@@ -73,7 +73,7 @@ async def latest(
     else:
         chunks = await _scope_chunks(store, swarm, table, chunk)
     for each in chunks:
-        time = max(time, await swarm.caught_up(each))
+        time = max(time, await swarm.reads.caught_up(each))
     return time
 
 
@@ -118,7 +118,7 @@ async def scan_labelled(
     assert isinstance(store, LabelledStore)
     if swarm is not None:
         for chunk in store.label_chunks(label, table):
-            await swarm.read_at(chunk, time)
+            await swarm.reads.read_at(chunk, time)
     return store.scan_labelled(time, label, table=table)
 
 

@@ -26,9 +26,9 @@ import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from mapapi.core.change import Conflict
 from mapapi.core.ids import ChunkId
 from mapapi.core.proposal import LogEntry, Proposal, TxDecision
-from mapapi.core.transaction import Conflict
 
 
 class Phase(enum.Enum):

@@ -6,9 +6,9 @@ import sqlite3
 from pathlib import Path
 
 from mapapi import Peer
+from mapapi.core.change import Change, Op
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Op
 from mapapi.service.fsck import check_repository
 from mapapi.swarm.apply import apply_proposal
 from tests.cli.conftest import Mapctl

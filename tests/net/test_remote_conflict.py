@@ -10,9 +10,9 @@ from __future__ import annotations
 import pytest
 
 from mapapi import ConflictError, Peer
+from mapapi.core.change import Op
 from mapapi.core.errors import UsageError
 from mapapi.core.table import message_class
-from mapapi.core.transaction import Op
 from mapapi.net import Ping, Request
 
 from .conftest import MakeRpc

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import asyncio
 
+from mapapi.core.change import Change, Op
 from mapapi.core.ids import ChunkId, ItemId
-from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.swarm.group_members import REMOVE_AFTER
 from mapapi.swarm.raft_wire import node_id
 from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of

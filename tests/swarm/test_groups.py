@@ -13,11 +13,12 @@ import sqlite3
 import pytest
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import ConflictError, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.group_members import change_members

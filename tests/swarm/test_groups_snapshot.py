@@ -5,9 +5,10 @@ with a history, catches up from the leader's snapshot and then follows the log.
 
 from __future__ import annotations
 
+from mapapi.core.change import Change, Op
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId
-from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.swarm.group_members import change_members
 from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture

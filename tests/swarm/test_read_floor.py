@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import pytest
 
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import ConflictError
 from mapapi.core.ids import ChunkId, ItemId
-from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.core.transaction import Transaction
 from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture
 

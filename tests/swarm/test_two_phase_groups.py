@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import asyncio
 
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import ChunkBusy, ConflictError, ProposalLost
 from mapapi.core.history import CommitRecord
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.proposal import Proposal, TxDecision
-from mapapi.core.transaction import Change, Op, Transaction
+from mapapi.core.transaction import Transaction
 from mapapi.swarm.tx_recovery import TxRecovery
 from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
 from tests.swarm.raft_world import world as world  # the fixture

@@ -9,10 +9,11 @@ from pathlib import Path
 import pytest
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal
-from mapapi.core.transaction import Change, Isolation, Op
+from mapapi.core.transaction import Isolation
 from mapapi.store.memory import MemoryStore
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.apply import Outcome, apply_proposal

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Op
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
-from mapapi.core.transaction import Change, Op
 from mapapi.store.base import ReplicaStore
 from mapapi.store.memory import MemoryStore
 from mapapi.store.sqlite import SqliteStore

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal, TxDecision
-from mapapi.core.transaction import Change, Op
 from mapapi.store.base import ReplicaStore
 from mapapi.store.memory import MemoryStore
 from mapapi.store.sqlite import SqliteStore

@@ -3,11 +3,11 @@
 import pytest
 
 from mapapi.core import codec
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.table import message_class
-from mapapi.core.transaction import Change, Conflict, Op
 from mapapi.core.view import View
 
 CHUNK = ChunkId.new()

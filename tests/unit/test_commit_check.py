@@ -16,11 +16,11 @@ import pytest
 
 from mapapi._pb.mapapi.v1.types_pb2 import Counter
 from mapapi.core import codec, limits
+from mapapi.core.change import Change, Op
 from mapapi.core.errors import ChunkNotFound, LimitExceeded, NotParticipatingError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal, TimeFloor, TxDecision
-from mapapi.core.transaction import Change, Op
 from mapapi.store.base import TxRow
 from mapapi.store.sqlite import SqliteStore
 from mapapi.swarm.commit_check import check_proposal

@@ -1,6 +1,5 @@
 """The failure detector (swarm/failure.py; issue 7 §1)."""
 
-
 import pytest
 
 from mapapi.core.ids import PeerId

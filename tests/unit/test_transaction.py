@@ -21,9 +21,10 @@ from mapapi import (
     UsageError,
     ViewClosedError,
 )
+from mapapi.core.change import Change, Op
 from mapapi.core.history import Revision
 from mapapi.core.ids import CommitId, PeerId
-from mapapi.core.transaction import Change, Op, Transaction, TxState
+from mapapi.core.transaction import Transaction, TxState
 from mapapi.core.validate import build_revisions, validate
 
 # -- pure validation ----------------------------------------------------------

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.history import Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.proposal import Proposal, TxDecision
-from mapapi.core.transaction import Change, Conflict, Op
 from mapapi.swarm.two_phase import Answer, TwoPhase
 
 A, B, C = sorted(ChunkId.new() for _ in range(3))

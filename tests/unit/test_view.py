@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.history import Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.core.transaction import Change, Conflict, Op
 from mapapi.core.view import View, discards, mapctl_in, settle
 
 CHUNK = ChunkId.new()
