@@ -307,10 +307,11 @@ class NotChunkLeader(NetworkError):
     code = 47
     advice = "retry now: the group elects a leader within a second or so"
 
-    def __init__(self, chunk: ChunkId, leader: PeerId | None) -> None:
-        self.chunk, self.leader = chunk, leader
+    @classmethod
+    def of(cls, chunk: ChunkId, leader: PeerId | None) -> NotChunkLeader:
+        """The error for `chunk`, naming the leader this peer knows (or the election)."""
         where = f"peer {leader.short} leads it" if leader else "it is electing a leader"
-        super().__init__(f"this peer does not lead chunk {chunk.short}: {where}")
+        return cls(f"this peer does not lead chunk {chunk.short}: {where}")
 
 
 class NoQuorum(NetworkError):
@@ -324,12 +325,13 @@ class NoQuorum(NetworkError):
         "the chunk commits again once a majority of its voters is reachable"
     )
 
-    def __init__(self, chunk: ChunkId, voters: int, down: list[str], why: str) -> None:
-        self.chunk = chunk
+    @classmethod
+    def of(cls, chunk: ChunkId, voters: int, down: list[str]) -> NoQuorum:
+        """The error for `chunk`, of whose `voters` those named in `down` do not answer."""
         reachable = voters - len(down)
-        super().__init__(
+        return cls(
             f"no quorum for chunk {chunk.short}: {reachable} of {voters} voters reachable "
-            f"({', '.join(down)} down); {why}"
+            f"({', '.join(down)} down)"
         )
 
 

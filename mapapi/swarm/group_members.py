@@ -152,7 +152,7 @@ class GroupMembers:
         """
         leader = self.groups.leader(chunk)
         if leader is None:
-            raise NotChunkLeader(chunk, None)
+            raise NotChunkLeader.of(chunk, None)
         if leader != self.groups.me:
             async with asyncio.timeout(timeout):
                 await self._ask(leader, GroupLeave(chunk))

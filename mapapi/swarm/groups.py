@@ -292,7 +292,7 @@ class RaftGroups:
             group.node.read_index(context)
         except NotLeader as exc:
             group.reads.pop(context, None)
-            raise NotChunkLeader(chunk, self._peer(exc.leader)) from None
+            raise NotChunkLeader.of(chunk, self._peer(exc.leader)) from None
         self._process(group)
         self._flush()
         try:
@@ -320,7 +320,7 @@ class RaftGroups:
         try:
             index, term = start()
         except NotLeader as exc:
-            raise NotChunkLeader(group.chunk, self._peer(exc.leader)) from None
+            raise NotChunkLeader.of(group.chunk, self._peer(exc.leader)) from None
         done: asyncio.Future[Applied] = asyncio.get_running_loop().create_future()
         group.waiting[index] = (term, done)
         self._process(group)
@@ -335,7 +335,7 @@ class RaftGroups:
     def _group(self, chunk: ChunkId) -> GroupState:
         group = self._groups.get(chunk)
         if group is None:
-            raise NotChunkLeader(chunk, None)
+            raise NotChunkLeader.of(chunk, None)
         return group
 
     # -- the Ready loop ----------------------------------------------------------------

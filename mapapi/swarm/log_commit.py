@@ -314,7 +314,7 @@ class LogCommits:
         down = [p for p in voters if p != self.groups.me and not self._answers(p)]
         if len(voters) - len(down) > len(voters) // 2:
             return error
-        return NoQuorum(chunk, len(voters), [self._label(p) for p in down], str(error))
+        return NoQuorum.of(chunk, len(voters), [self._label(p) for p in down])
 
     async def _propose_once(self, chunk: ChunkId, entry: LogEntry, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):
@@ -323,7 +323,7 @@ class LogCommits:
             return outcome
         leader = self.groups.leader(chunk)
         if leader is None:
-            raise NotChunkLeader(chunk, None)
+            raise NotChunkLeader.of(chunk, None)
         try:
             answer = await self.call_raft_propose(leader, chunk, data)
         except ConflictError as exc:
@@ -367,7 +367,7 @@ class LogCommits:
         """
         body: RaftPropose = req.body
         if not self.groups.is_leader(body.chunk):
-            raise NotChunkLeader(body.chunk, self.groups.leader(body.chunk))
+            raise NotChunkLeader.of(body.chunk, self.groups.leader(body.chunk))
         entry = codec.decode_entry(body.proposal)  # what would not apply: CorruptRepoError
         members = {self.groups.me, *self.groups.members(body.chunk)}
         check_proposal(self.groups.store, body.chunk, entry, req.sender, members)

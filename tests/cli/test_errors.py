@@ -174,25 +174,29 @@ class TestNetworkAdvice:
         assert type(received) is cls
         assert str(received) == "it failed; act: run `mapctl fix`"
 
-    async def test_a_crashed_holder_is_named_with_what_to_do(
+    async def test_crashed_voters_are_named_with_what_to_do(
         self, daemon: InProcessDaemon, tmp_path: Path
     ) -> None:
         assert daemon.record is not None
         await daemon.json("table", "create", "pts", "--type", STRUCT)
         chunk = (await daemon.json("chunk", "create", "pts"))["id"]
-        other = Peer.of(Repository.init(tmp_path / "other", "robot2"))
-        await other.start()
+        others = [Peer.of(Repository.init(tmp_path / n, n)) for n in ("robot2", "robot3")]
         try:
-            await other.join(daemon.record.join)
-            await other.participate(ChunkId(chunk))
-            await _crash(other)
+            for other in others:  # three holders: three voters
+                await other.start()
+                await other.join(daemon.record.join)
+                await other.participate(ChunkId(chunk))
+            for other in others:
+                await _crash(other)
             assert (await daemon("set", "pts", '{"x": 1}')).code == 0
-            failed = await daemon("commit", "-m", "while robot2 is down")
+            failed = await daemon("commit", "-m", "while robot2 and robot3 are down")
         finally:
-            await other.close()
+            for other in others:
+                await other.close()
         assert failed.code == 5, failed
-        assert "robot2 (" in failed.err, failed.err
-        assert "wait about" in failed.err, failed.err
+        assert "no quorum for chunk" in failed.err, failed.err
+        assert "robot2 (" in failed.err and "robot3 (" in failed.err, failed.err
+        assert "act: bring the voters named back" in failed.err, failed.err
 
 
 async def _crash(peer: Peer) -> None:
