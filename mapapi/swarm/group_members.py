@@ -14,6 +14,7 @@ as the leader, removes members that liveness has declared dead for a while.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Callable, Iterable
 
@@ -32,6 +33,9 @@ from mapapi.swarm.voters import DEFAULT_REPLICATION, next_change
 
 log = logging.getLogger(__name__)
 
+CATCH_UP_WAIT = 2.0
+"""Seconds a membership change waits for a learner to catch up before it leaves its
+promotion to a later round (`GroupMembers.reap`)."""
 PROBE_TIMEOUT = 2.0
 """Seconds a joiner has to answer the leader's ping before it is taken in."""
 ELECTION_PAUSE = 0.05
@@ -48,7 +52,9 @@ async def change_members(
     """As the chunk's leader, make `holders` the group's members, one single-server
     change at a time, with the voters `voters.next_change` picks (an odd number,
     at most `factor`); returns the configuration then. A new holder must have
-    called `RaftGroups.join` to take in the log.
+    called `RaftGroups.join` to take in the log. A learner to promote is waited
+    for `CATCH_UP_WAIT` seconds at most (a live joiner catches up in a round trip);
+    one that lags longer is promoted by a later `reap`, once caught up.
 
     Raises:
         NotChunkLeader: this peer does not lead the chunk (or stopped leading).
@@ -56,13 +62,19 @@ async def change_members(
     """
     wanted = {node_id(p) for p in holders}
     me = node_id(groups.me)
+    loop = asyncio.get_running_loop()
+    patience = loop.time() + CATCH_UP_WAIT
     try:
         async with asyncio.timeout(timeout):
             while next_change(groups.config(chunk), wanted, factor, me) is not None:
                 ready = groups.promotable(chunk)
                 change = next_change(groups.config(chunk), wanted, factor, me, ready)
                 if change is None:  # a learner to promote has not caught up yet
-                    await groups.progressed(chunk)
+                    if loop.time() >= patience:
+                        break
+                    with contextlib.suppress(TimeoutError):
+                        async with asyncio.timeout_at(patience):
+                            await groups.progressed(chunk)
                     continue
                 try:
                     await groups.propose_change(chunk, change, timeout)

@@ -106,10 +106,11 @@ class RingValues:
         return pred is None or ring.responsible(key, self._node.key, pred.key)
 
     async def _replicate(self, body: object, targets: list[Node] | None = None) -> None:
-        targets = [
-            s for s in (self._node.successors if targets is None else targets) if s != self._node.me
-        ]
-        answers = await ask_all({s: self._node.call(s, body, Ack) for s in targets})
+        nodes = self._node.successors if targets is None else targets
+        # once each: a successor list may name a node twice (a small or repairing ring),
+        # and a second call under the same key would be dropped unawaited
+        unique = dict.fromkeys(s for s in nodes if s != self._node.me)
+        answers = await ask_all({s: self._node.call(s, body, Ack) for s in unique})
         for node, error in answers.failed.items():
             log.debug("replica %s missed an update: %s", node.address, error)
 
