@@ -16,6 +16,7 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
+from mapapi.core import limits
 from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.chunk_state import ChunkState, TxState
 from mapapi.core.errors import CorruptRepoError
@@ -202,36 +203,42 @@ def decode_entry(data: bytes) -> LogEntry:
     """What a chunk's log entry carries (`encode_entry`).
 
     Raises:
-        CorruptRepoError: the entry does not parse (a damaged log).
+        CorruptRepoError: the entry does not parse (a damaged log), or carries a
+            time above `limits.MAX_LAMPORT` (no store could keep it).
     """
     entry = core_pb2.ChunkLogEntry()
     try:
         entry.ParseFromString(data)
         if entry.WhichOneof("body") == "decision":
             d = entry.decision
-            return TxDecision(CommitId.from_bytes(d.commit_id), d.commit, d.time)
+            return TxDecision(CommitId.from_bytes(d.commit_id), d.commit, _time(d.time))
         if entry.WhichOneof("body") == "floor":
-            return TimeFloor(entry.floor.time)
+            return TimeFloor(_time(entry.floor.time))
         if entry.WhichOneof("body") != "proposal":
             raise ValueError("the entry carries no proposal, decision or floor")
         m = entry.proposal
         return Proposal(
             CommitId.from_bytes(m.commit_id),
-            m.time,
+            _time(m.time),
             PeerId.from_bytes(m.author),
             m.author_name,
             m.view,
             m.message,
-            m.begin_time,
+            _time(m.begin_time),
             _isolation(m.isolation),
             tuple(change_from_pb(c) for c in m.changes),
-            {ItemId.from_bytes(s.item_id): s.time for s in m.since},
+            {ItemId.from_bytes(s.item_id): _time(s.time) for s in m.since},
             frozenset(_read_set(m)),
             frozenset(_scopes(m)),
             tuple(ChunkId.from_bytes(c) for c in m.participants),
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"an entry in a chunk's log does not parse: {exc}") from exc
+
+
+def _time(value: int) -> int:
+    """A logical time from a log entry (`LimitExceeded`, a ValueError, above the cap)."""
+    return limits.lamport("a time in a chunk's log entry", value)
 
 
 def encode_chunk_state(state: ChunkState) -> bytes:

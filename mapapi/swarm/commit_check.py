@@ -5,6 +5,7 @@ Every holder decides a proposal from its replica and the proposal alone
 (`swarm/apply.py`), so a proposal that would break the store must never enter
 the log, whoever sends it: the leader refuses, before appending, a proposal or
 a readers' floor from a peer that is no member of the chunk's group, a proposal
+under the id of a commit that exists (its revisions would join that commit's) or
 that speaks for another peer, writes to another chunk or table than the chunk's,
 to an item of another chunk, twice to one item, or carries a payload that is not
 of the table's type (or any, for a removal) or is over the size limit, and a
@@ -52,6 +53,10 @@ def check_proposal(
         )
     if not isinstance(entry, Proposal):
         return
+    if store.commit_record(entry.commit_id) and store.raft_tx(chunk, entry.commit_id) is None:
+        raise UsageError(
+            f"commit {entry.commit_id.short} exists already: a proposal needs a new commit id"
+        )
     if entry.author != sender:
         raise UsageError(
             f"a proposal by {entry.author.short} was sent by {sender.short}: a peer "

@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from mapapi.core.errors import ProposalLost, RequestTimeout
+from mapapi.core.errors import CorruptRepoError, ProposalLost, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
@@ -195,3 +195,18 @@ def step_batch(
         group.node.step(message)
         touched[group.chunk] = group
     return list(touched.values())
+
+
+def halted(group: GroupState, error: Exception) -> CorruptRepoError:
+    """The error of a group that stopped because its Ready could not be handled (the
+    store refused an entry's effect, say): logged with its cause, and every waiter
+    of the group fails with it. Every holder applies the same entries, so going on
+    past one would let this replica differ; the group stops here instead, and the
+    peer's next start resumes it from what the store holds."""
+    log.error("chunk %s: its Raft group stopped here: %r", group.chunk.short, error, exc_info=error)
+    halt = CorruptRepoError(
+        f"chunk {group.chunk.short}: its Raft group stopped on this peer ({error}); "
+        "restart the peer, and run `mapctl fsck` if it stops again"
+    )
+    group.fail_all(halt)
+    return halt

@@ -9,22 +9,21 @@ their entry applies. One ticker drives every group; all messages for one peer
 leave in one `RaftBatch` notification per round (`swarm/raft_mail.py`), so the
 heartbeats of many shared groups cost one frame per pair of peers. With a
 `StoreStates`, logs are compacted into snapshots of the chunk's state, which a
-member that joins or lags far behind installs (`swarm/chunk_state.py`).
-
-Node ids: the core numbers nodes with positive ints; a peer's node id is the top
-63 bits of its 128-bit `PeerId` (`node_id`), the same in every group and on
-every peer, so configurations in the logs name peers, never addresses.
+member that joins or lags far behind installs (`swarm/chunk_state.py`). A peer's
+node id is the top 63 bits of its `PeerId` (`node_id`), the same in every group,
+so configurations in the logs name peers, never addresses.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import random
 from collections.abc import Callable, Iterable
 from functools import partial
 
-from mapapi.core.errors import NotChunkLeader, PeerUnavailable, RequestTimeout
+from mapapi.core.errors import CorruptRepoError, NotChunkLeader, PeerUnavailable, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import Ack, RaftBatch
 from mapapi.net.rpc import Request, Rpc
@@ -37,6 +36,7 @@ from mapapi.swarm.group_state import (
     GroupState,
     apply_committed,
     compact,
+    halted,
     install,
     not_committed,
     persist,
@@ -207,9 +207,8 @@ class RaftGroups:
         return [p for p in peers if p is not None]
 
     def promotable(self, chunk: ChunkId) -> frozenset[int]:
-        """The node ids of the chunk's learners caught up with its log, as this
-        peer knows it leading the group (none otherwise): those `voters.next_change`
-        may promote."""
+        """The node ids of the learners `voters.next_change` may promote: caught up
+        with the log, as this peer knows it leading the group (none otherwise)."""
         return self._group(chunk).node.caught_up_learners()
 
     def applied(self, chunk: ChunkId) -> int:
@@ -259,9 +258,8 @@ class RaftGroups:
         return await self._await_entry(group, start, timeout)
 
     async def progressed(self, chunk: ChunkId) -> None:
-        """Until something next happens in the chunk's group here: entries applied,
-        or a member's messages stepped (a follower's answer moves the leader's view
-        of it). Callers check again what they wait for."""
+        """Until something next happens in the chunk's group here (entries applied,
+        a member's messages stepped); callers check again what they wait for."""
         group = self._group(chunk)
         group.progress.clear()
         await group.progress.wait()
@@ -344,7 +342,8 @@ class RaftGroups:
             await asyncio.sleep(tick)
             for group in list(self._groups.values()):
                 group.node.tick()
-                self._process(group)
+                with contextlib.suppress(CorruptRepoError):  # halted: logged, and gone
+                    self._process(group)
             self._flush()
 
     def rpc_raft_batch(self, req: Request) -> Ack:
@@ -359,7 +358,15 @@ class RaftGroups:
         return Ack()
 
     def _process(self, group: GroupState) -> None:
-        """Run the Ready loop of one group until it has nothing more to do."""
+        """Run the Ready loop of one group until it has nothing more to do; a group
+        whose Ready cannot be handled halts here (`group_state.halted`)."""
+        try:
+            self._ready_loop(group)
+        except Exception as exc:
+            self._groups.pop(group.chunk, None)
+            raise halted(group, exc) from exc
+
+    def _ready_loop(self, group: GroupState) -> None:
         while group.node.has_ready():
             rd = group.node.ready()
             persist(self.store, group.chunk, rd)

@@ -130,3 +130,10 @@ def test_only_the_coordinator_decides_commit(world: World) -> None:
         check_proposal(world.store, world.a, commit, STRANGER, MEMBERS)
     check_proposal(world.store, world.a, commit, WRITER, MEMBERS)
     check_proposal(world.store, world.a, TxDecision(prepare.commit_id, False), STRANGER, ())
+
+
+def test_a_proposal_under_an_existing_commit_id_is_refused(world: World) -> None:
+    (old,) = [c for c in world.store.commits() if world.a in c.chunks]
+    replayed = dataclasses.replace(world.proposal(), commit_id=old.id)
+    with pytest.raises(UsageError, match="exists already"):
+        check_proposal(world.store, world.a, replayed, WRITER, MEMBERS)
