@@ -4,14 +4,16 @@
 `MissionRules` is a `CommitRule` every peer of the application (`mapapi.app`)
 gets at construction (DESIGN "hooks passed in at construction"), so the rules
 hold whoever commits through it: `mapctl set`, the daemon, a script that opens
-`mapapi.open_peer`, an import. It runs on the writer's replica
-while the commit holds the chunks' locks, so two racing commits to one
-mission's chunk cannot both pass.
+`mapapi.open_peer`, an import. It runs on the writer's replicas: alone, inside
+the store's exclusive section (two racing commits cannot both pass); in a
+swarm, before the writer proposes to the chunks' logs, so two writers on two
+peers racing on one mission can both pass (a holder decides a commit from its
+replica of the chunk alone, and this rule reads other chunks).
 
 Cost follows the commit: each rule keeps an index of the rows held here
 (key -> items), brought up to date chunk by chunk from the revisions written
 since it last looked (`changed_since`, per chunk: a chunk's commits arrive in
-time order under its lock), then looks up each committed row's keys. A new
+time order, its log's), then looks up each committed row's keys. A new
 process reads each held chunk once on its first vertex or edge commit.
 
 What cannot be judged here is let through: an edge end in another mission no

@@ -2,7 +2,7 @@
 (`wire_pb2`); the core's values inside it go through the storage codec
 (`mapapi.core.codec`), and the Chord index's values are opaque bytes to it.
 
-Everything above it (transport, rpc, later the lock, commit and Chord code)
+Everything above it (transport, rpc, the Raft groups, commit and Chord code)
 works with the frozen dataclasses defined here: `Envelope` and its bodies.
 A body is registered once in `_BODIES` with the name of its `oneof body` field
 in `proto/mapapi/v1/wire.proto` and two converters; adding a message means

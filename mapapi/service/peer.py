@@ -210,10 +210,12 @@ class Peer:
     async def participate(
         self, chunk_id: ChunkId, progress: Progress | None = None, *, again: bool = False
     ) -> str:
-        """Replicate `chunk_id` here: fetch it with its history from a holder, under
-        its write lock, and receive every later commit. Returns the chunk's table.
+        """Replicate `chunk_id` here: join its Raft group through a holder, receive
+        its history (the log, or a snapshot) and every later commit. Returns the
+        chunk's table.
 
-        With `again`, a chunk held already is fetched anew (to catch up)."""
+        With `again`, nothing more happens for a chunk held already: its group
+        catches it up by itself (the flag stays for callers of the lock path)."""
         return await self._on_swarm().replicator.participate(chunk_id, progress, again=again)
 
     async def leave_chunk(self, chunk_id: ChunkId, *, force: bool = False) -> None:

@@ -13,8 +13,8 @@ error in peer.log on each side that sees it, recorded in the store
 (`Store.diverged`, for `mapctl peer status` and an offline `mapctl fsck`) until
 a later comparison with that holder agrees past it or the chunk is fetched anew.
 
-Which chunks to compare, and with whom, is given at construction: the lock
-path's holder sets now (`Swarm`), the chunks' Raft groups later.
+Which chunks to compare, and with whom, is given at construction: the holder
+sets the chunks' Raft groups keep in the store (`shared`).
 """
 
 from __future__ import annotations

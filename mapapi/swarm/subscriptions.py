@@ -4,13 +4,13 @@ A subscription is declarative (`mapapi.v1.Subscription`: a region, an optional
 table, optional ``field == value`` filters; never code). The subscriber stores
 it in every cell of the "subscriptions" spatial index its region overlaps and
 keeps it alive there (`Announcements`, so it vanishes a time-to-live after its
-subscriber does). A committing peer, once its commit is applied everywhere
-and while it still holds the chunks' write locks, asks the cells around the
-commit's items for the subscriptions whose region overlaps them (the owner
-filters by region), evaluates each one's table and filters itself, and pushes
-only the matching revisions to the subscriber. Because the next commit to a
-chunk needs the committer's lock, pushes about one chunk arrive in commit
-order; the subscriber queues them as they arrive.
+subscriber does). A committing peer, once the chunks' logs acknowledged its
+commit and before the commit returns, asks the cells around the commit's items
+for the subscriptions whose region overlaps them (the owner filters by region),
+evaluates each one's table and filters itself, and pushes only the matching
+revisions to the subscriber. One writer's pushes arrive in its commit order;
+two writers committing to one chunk at once push independently (each push
+carries its commit's time). The subscriber queues them as they arrive.
 
 An item counts as inside a region when its box overlaps it, before or after
 the commit (an item that leaves the region, or is removed from it, is news).
@@ -66,7 +66,7 @@ REGION_FILTER = "region"
 """The member filter a cell owner applies: subscriptions whose region overlaps a box."""
 
 PUSH_TIMEOUT = 2.0
-"""Seconds a committer waits for a subscriber to take a push (it holds the locks)."""
+"""Seconds a committer waits for a subscriber to take a push (its commit waits too)."""
 
 
 def parse_where(text: str) -> tuple[str, Any]:
