@@ -73,6 +73,15 @@ class GroupState:
                     ProposalLost(f"chunk {self.chunk.short}: entry {entry.index} was replaced")
                 )
 
+    def new_leader(self, role: Role, leader: int, error: Exception) -> None:
+        """The node's role or leader changed: keep them, and fail every read still
+        waiting for a leader's confirmation with `error` (a ReadIndex request dies
+        with the leader that took it; the reader asks again, the new one)."""
+        self.role, self.leader = role, leader
+        for waiting in self.reads.values():
+            if not waiting.done():
+                waiting.set_exception(error)
+
     def fail_all(self, error: Exception) -> None:
         """Fail every proposal still waiting (the peer is closing)."""
         for _, done in self.waiting.values():

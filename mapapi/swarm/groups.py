@@ -380,7 +380,7 @@ class RaftGroups:
                 if waiting is not None and not waiting.done():
                     waiting.set_result(read.index)
             if (rd.role, rd.leader) != (group.role, group.leader):
-                group.role, group.leader = rd.role, rd.leader
+                group.new_leader(rd.role, rd.leader, NotChunkLeader.of(group.chunk, None))
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
                 self._on_change()
             group.node.advance(rd)
