@@ -195,7 +195,8 @@ class TestNetworkAdvice:
                 await other.close()
         assert failed.code == 5, failed
         assert "no quorum for chunk" in failed.err, failed.err
-        assert "robot2 (" in failed.err and "robot3 (" in failed.err, failed.err
+        assert "robot2 (" in failed.err, failed.err
+        assert "robot3 (" in failed.err, failed.err
         assert "act: bring the voters named back" in failed.err, failed.err
 
 
