@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import ChunkNotFound, NotParticipatingError, UsageError
@@ -26,7 +26,7 @@ from mapapi.lookup.spatial_index import QueryStats
 from mapapi.service.fsck import rollback_text
 from mapapi.service.repo import Repository
 from mapapi.service.tables import Tables
-from mapapi.store import ChunkInfo, MemoryStore
+from mapapi.store import ChunkInfo, MemoryStore, offload
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm import reading
 from mapapi.swarm.commit import commit_distributed, commit_locally, refuse_shared
@@ -34,7 +34,7 @@ from mapapi.swarm.placed import Here, PlacedChunk, query_bbox
 from mapapi.swarm.triggers import Callback, Triggers
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
 
     from google.protobuf.message import Message
 
@@ -51,6 +51,9 @@ if TYPE_CHECKING:
     from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec
 
 log = logging.getLogger(__name__)
+
+P = ParamSpec("P")
+T = TypeVar("T")
 
 
 class Peer:
@@ -356,8 +359,28 @@ class Peer:
     ) -> list[Revision]:
         """The items of `table` labelled `label` by `labels` visible at `time`, by
         id: from the store's index when it keeps one of `labels` (only those rows
-        are read), else filtered from the table's rows (`mapapi.store.labels`)."""
+        are read), else filtered from the table's rows (`mapapi.store.labels`);
+        read in a worker thread."""
         return await reading.scan_labelled(self.store, self.swarm, labels, time, label, table)
+
+    async def labelled_readable(self, labels: Labels, label: str, tables: Sequence[str]) -> None:
+        """Wait until no writer holds a chunk of `tables` with rows labelled
+        `label`: then `scan_labelled_now` at a time taken before reads them all."""
+        await reading.labelled_readable(self.store, self.swarm, labels, label, tables)
+
+    def scan_labelled_now(
+        self, time: int, labels: Labels, label: str, table: str
+    ) -> list[Revision]:
+        """`scan_labelled` without waiting for writers (after `labelled_readable`),
+        from any thread: for functions run with `off_loop`."""
+        return reading.scan_labelled_now(self.store, labels, time, label, table)
+
+    async def off_loop(self, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
+        """`fn(*args, **kwargs)` in a worker thread with its own connection to the
+        store, so the peer keeps serving while it runs (`mapapi.store.offload`;
+        on a memory store it runs here). `fn` may read and write the store but
+        must not touch asyncio objects: it returns its result."""
+        return await offload.off_loop(self.store, fn, *args, **kwargs)
 
     def label_summaries(
         self, labels: Labels, only: Sequence[str] | None = None

@@ -113,6 +113,11 @@ class SqliteStore(SqliteChains):
         rows = self._con().execute(sql, (table, table))
         return [ChunkInfo(ChunkId(cid), t, n) for cid, t, n in rows]
 
+    def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
+        """The ids of `chunks(table)`, in order, without counting their items."""
+        sql = "SELECT id FROM chunks WHERE ? IS NULL OR table_name = ? ORDER BY id"
+        return [ChunkId(cid) for (cid,) in self._con().execute(sql, (table, table))]
+
     def chunk_table(self, chunk_id: ChunkId) -> str:
         """The table of a chunk."""
         row = (

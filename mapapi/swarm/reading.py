@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from mapapi.core.errors import ChunkNotFound
 from mapapi.store.labels import LabelledStore, summarise
+from mapapi.store.offload import off_loop
 
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
@@ -47,15 +48,15 @@ async def read(
 async def scan(
     store: ReplicaStore, swarm: Swarm | None, time: int, table: str, chunk: ChunkId | None
 ) -> list[Revision]:
-    """Items visible at `time` in a table or chunk; a chunk not held here is
-    fetched first."""
+    """Items visible at `time` in a table or chunk (read in a worker thread); a
+    chunk not held here is fetched first."""
     if swarm is not None:
         if chunk is not None and chunk not in {c.id for c in store.chunks()}:
             await swarm.replicator.participate(chunk)
         chunks = [chunk] if chunk is not None else [c.id for c in store.chunks(table)]
         for each in chunks:
             await swarm.locks.wait_readable(each)
-    return store.scan(time, table=table, chunk=chunk)
+    return await off_loop(store, store.scan, time, table=table, chunk=chunk)
 
 
 async def scan_labelled(
@@ -64,15 +65,39 @@ async def scan_labelled(
     """The items of `table` labelled `label` visible at `time`: from the store's
     label index when it keeps one for `labels`, else filtered from the table's
     rows. In a swarm, a read of the label's chunks waits while a writer holds
-    them (as `scan`)."""
+    them (as `scan`); the rows are read in a worker thread (`off_loop`)."""
+    await labelled_readable(store, swarm, labels, label, (table,))
+    return await off_loop(store, scan_labelled_now, store, labels, time, label, table)
+
+
+async def labelled_readable(
+    store: ReplicaStore, swarm: Swarm | None, labels: Labels, label: str, tables: Sequence[str]
+) -> None:
+    """Wait until no writer holds a chunk of `tables` with rows labelled `label`
+    (every chunk of those tables when the store keeps no index of `labels`), so
+    no commit at or before a read time taken now can still arrive there."""
+    if swarm is None:
+        return
+    for table in tables:
+        if _indexed(store, labels):
+            assert isinstance(store, LabelledStore)
+            chunks = store.label_chunks(label, table)
+        else:
+            chunks = [c.id for c in store.chunks(table)]
+        for chunk in chunks:
+            await swarm.locks.wait_readable(chunk)
+
+
+def scan_labelled_now(
+    store: ReplicaStore, labels: Labels, time: int, label: str, table: str
+) -> list[Revision]:
+    """`scan_labelled` without waiting for writers: after `labelled_readable`, in
+    any thread (it touches only the store)."""
     if not _indexed(store, labels):
         fn = labels.of(store.tables().get(table, ""))
-        rows = await scan(store, swarm, time, table, None)
+        rows = store.scan(time, table=table)
         return [r for r in rows if fn is not None and _label(fn, r.data) == label]
     assert isinstance(store, LabelledStore)
-    if swarm is not None:
-        for chunk in store.label_chunks(label, table):
-            await swarm.locks.wait_readable(chunk)
     return store.scan_labelled(time, label, table=table)
 
 
