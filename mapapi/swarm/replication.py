@@ -51,6 +51,7 @@ from mapapi.net.messages import (
 )
 from mapapi.net.rpc import Request, Rpc, ask_all, first_answer
 from mapapi.store.base import ReplicaStore
+from mapapi.store.offload import off_loop
 from mapapi.swarm import faults
 from mapapi.swarm.commit_check import check_batch
 from mapapi.swarm.lock_client import Held, LockService
@@ -65,7 +66,10 @@ AppliedHook = Callable[[CommitRecord, Sequence[Revision]], None]
 
 log = logging.getLogger(__name__)
 
-PART_REVISIONS = 5_000  # revisions per ChunkPart message
+PART_REVISIONS = 1_000
+"""Revisions per ChunkPart message: each is decoded on the receiver's event loop
+(about 10 ms for 1,000 on the 2-core machine; 5,000 took 40-75 ms, a stall of
+the heartbeats each; issue 14 §1)."""
 PROBE_TIMEOUT = 2.0  # seconds a holder has to answer a ping before it is asked for a chunk
 Progress = Callable[[int, int], None]  # (parts received, parts in all)
 HOLDER_TTL = 30.0
@@ -90,6 +94,13 @@ def _replaced(
         sender.short,
         len(gone),
     )
+
+
+def _state_of(
+    store: ReplicaStore, chunk: ChunkId
+) -> tuple[list[Revision], dict[CommitId, CommitRecord]]:
+    """A chunk's history and its commit records, by id (read in a worker thread)."""
+    return store.chunk_revisions(chunk), {c.id: c for c in store.chunk_commits(chunk)}
 
 
 def encode_holder(member: Member) -> bytes:
@@ -359,8 +370,9 @@ class Replicator:
     async def _send_state(
         self, chunk: ChunkId, table: str, to: PeerId, holders: Sequence[PeerId]
     ) -> None:
-        revisions = self.store.chunk_revisions(chunk)
-        commits = {c.id: c for c in self.store.chunk_commits(chunk)}
+        # read in a worker thread (its own connection): a chunk of 100,000 rows would
+        # stall this loop, and the newcomer's heartbeats, for seconds (issue 14 §1)
+        revisions, commits = await off_loop(self.store, _state_of, self.store, chunk)
         await self._check_history(chunk, commits, revisions)
         info = TableInfo(table, self.store.tables()[table])
         members = tuple(self._member(p) for p in holders)
@@ -424,7 +436,9 @@ class Replicator:
             if member.id != self.me and member.address:
                 self.members.add(member)
         before = self.store.chain_links(part.chunk)
-        self.store.install_chunk(
+        await off_loop(  # one SQL transaction, in a worker thread (issue 14 §1)
+            self.store,
+            self.store.install_chunk,
             part.chunk,
             part.table.name,
             part.table.type_name,
@@ -608,23 +622,23 @@ class Replicator:
     async def detach_all(self) -> None:
         """Leave every chunk shared with others but keep the replicas (graceful stop),
         so the others go on committing without this peer."""
-        for info in self.store.chunks():
+        for chunk in self.store.chunk_ids():
             try:
-                await self.leave(info.id, keep=True)
+                await self.leave(chunk, keep=True)
             except MapError as exc:
-                log.warning("could not leave %s cleanly: %s", info.id.short, exc)
+                log.warning("could not leave %s cleanly: %s", chunk.short, exc)
 
     async def rejoin(self) -> list[ChunkId]:
         """Become a holder again of every chunk this peer shared when it stopped
         (fetching what others committed meanwhile); returns those chunks."""
         back = []
-        for info in self.store.chunks():
-            if [p for p in self.store.holders(info.id) if p != self.me]:
+        for chunk in self.store.chunk_ids():
+            if [p for p in self.store.holders(chunk) if p != self.me]:
                 try:
-                    await self.participate(info.id, again=True)
-                    back.append(info.id)
+                    await self.participate(chunk, again=True)
+                    back.append(chunk)
                 except MapError as exc:
-                    log.warning("could not rejoin %s: %s", info.id.short, exc)
+                    log.warning("could not rejoin %s: %s", chunk.short, exc)
         return back
 
     def admit(self, chunk: ChunkId, writer: PeerId) -> None:
@@ -728,7 +742,7 @@ class Replicator:
         holds now (shared ones are announced again as `rejoin` makes this peer
         their holder again) and refresh every announcement in the background."""
         self.chord = chord
-        alone = [c.id for c in self.store.chunks() if self.store.holders(c.id) in ([], [self.me])]
+        alone = [c for c in self.store.chunk_ids() if self.store.holders(c) in ([], [self.me])]
         self.announced.start(chord, alone)
 
     def _holder_entries(self, chunk: ChunkId) -> list[Entry]:
