@@ -27,6 +27,7 @@ from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.transaction import Change, Conflict, MergeFn, Transaction
 from mapapi.core.validate import build_revisions, validate
 from mapapi.store.base import ReplicaStore, Store
+from mapapi.store.offload import off_loop
 from mapapi.swarm import apply
 from mapapi.swarm.quorum import is_quorum
 
@@ -60,15 +61,57 @@ def _decide(
         ConflictError: with (base, ours, theirs) for every conflicting item.
         UsageError: a rule refuses the accepted changes.
     """
+    try:
+        accepted, latest = _checked(store, tx, try_merge, rules)
+    finally:
+        clock.advance_to(store.clock())
+    if not accepted:
+        return Decision(None, [])
+    return _stamped(tx, message, accepted, latest, clock.tick())
+
+
+async def _decide_off_loop(
+    store: Store,
+    tx: Transaction,
+    message: str,
+    clock: LamportClock,
+    try_merge: MergeFn | None,
+    rules: Sequence[CommitRule] = (),
+) -> Decision:
+    """`_decide`, with the validation and the stamping in a worker thread (a
+    mission of 100,000 rows takes seconds of both: issue 14 §1); the clock, which
+    every message on the loop ticks, is ticked here on the loop."""
+    try:
+        accepted, latest = await off_loop(store, _checked, store, tx, try_merge, rules)
+    finally:
+        clock.advance_to(store.clock())
+    if not accepted:
+        return Decision(None, [])
+    time = clock.tick()
+    return await off_loop(store, _stamped, tx, message, accepted, latest, time)
+
+
+def _checked(
+    store: Store, tx: Transaction, try_merge: MergeFn | None, rules: Sequence[CommitRule]
+) -> tuple[list[Change], dict[ItemId, Revision]]:
+    """The changes of `tx` that validation accepts (all, or ConflictError), once
+    `rules` accept them, with the newest revisions of their items (any thread)."""
     accepted, latest, conflicts = _validate(store, tx, try_merge)
-    clock.advance_to(store.clock())
     if conflicts:
         raise ConflictError(conflicts, tx, seen_at=store.clock())
     for rule in rules:
         rule.check(store, accepted)
-    if not accepted:
-        return Decision(None, [])
-    time = clock.tick()
+    return accepted, latest
+
+
+def _stamped(
+    tx: Transaction,
+    message: str,
+    accepted: list[Change],
+    latest: dict[ItemId, Revision],
+    time: int,
+) -> Decision:
+    """The commit of the `accepted` changes at `time`: its record and revisions."""
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
     record = CommitRecord(CommitId.new(), time, tx.author, message, chunks, tx.author_name, tx.view)
     return Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))
@@ -208,8 +251,12 @@ async def commit_distributed(
     pushed = False
     try:
         for chunk in _chunks_to_lock(store, tx):
-            held.append(await replicator.lock(chunk, lambda: _precheck(store, tx, try_merge)))
-        decision = _decide(store, tx, message, clock, try_merge, rules)
+            held.append(
+                await replicator.lock(
+                    chunk, lambda: off_loop(store, _precheck, store, tx, try_merge)
+                )
+            )
+        decision = await _decide_off_loop(store, tx, message, clock, try_merge, rules)
         record = decision.record
         if record is not None:
             try:
@@ -217,7 +264,7 @@ async def commit_distributed(
                     held,
                     record,
                     decision.revisions,
-                    lambda: store.apply_commit(record, decision.revisions),
+                    lambda: off_loop(store, store.apply_commit, record, decision.revisions),
                 )
             except LockNotHeld as exc:
                 raise LockTimeout(

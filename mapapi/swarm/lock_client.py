@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Awaitable, Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
 from mapapi.core.errors import (
@@ -303,7 +303,7 @@ class LockService:
         holders: Sequence[PeerId],
         *,
         current: Callable[[], Sequence[PeerId]] | None = None,
-        precheck: Callable[[], None] | None = None,
+        precheck: Callable[[], Awaitable[None]] | None = None,
     ) -> Held:
         """Write-lock `chunk` at every holder: the arbiter first, then the rest
         in parallel (two round trips, not one per holder).
@@ -316,7 +316,7 @@ class LockService:
                 be the new arbiter), the grants are handed back and the lock is
                 taken again from the current holders, so a commit reaches every
                 holder and no two writers disagree on the arbiter.
-            precheck: called once the arbiter granted, before the others are asked;
+            precheck: awaited once the arbiter granted, before the others are asked;
                 if it raises (a commit that the local replica already shows to be
                 in conflict), only the arbiter's grant is handed back, which under
                 contention saves a lock and an unlock at every other holder.
@@ -339,7 +339,7 @@ class LockService:
                 else:
                     if not self._holders_changed(ordered, current):
                         if precheck is not None:
-                            precheck()  # raises: only the arbiter's grant goes back
+                            await precheck()  # raises: only the arbiter's grant goes back
                         asked = ordered
                         failure = await self._acquire_rest(held, ordered[1:])
                         if not self._holders_changed(ordered, current):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -181,7 +181,9 @@ class Replicator:
     def _holders(self, chunk: ChunkId) -> list[PeerId]:
         return self.store.holders(chunk) or [self.me]
 
-    async def lock(self, chunk: ChunkId, precheck: Callable[[], None] | None = None) -> Held:
+    async def lock(
+        self, chunk: ChunkId, precheck: Callable[[], Awaitable[None]] | None = None
+    ) -> Held:
         """Write-lock `chunk` at all its holders, current when the lock is held
         (a holder that joined or left while we waited is accounted for);
         `precheck` as in `LockService.acquire`."""
@@ -260,10 +262,11 @@ class Replicator:
         held: Sequence[Held],
         record: CommitRecord,
         revisions: Sequence[Revision],
-        apply_locally: Callable[[], None],
+        apply_locally: Callable[[], Awaitable[None]],
     ) -> list[tuple[ChunkId, PeerId]]:
-        """Stage the commit at every other holder, apply it here, then apply it
-        there (which releases their locks). One batch per chunk per holder.
+        """Stage the commit at every other holder, apply it here (`apply_locally`,
+        in a worker thread: the leases keep being renewed meanwhile), then apply
+        it there (which releases their locks). One batch per chunk per holder.
 
         The local apply decides the commit: until then, a holder that asks how
         it ended hears "pending", and afterwards "applied".
@@ -299,7 +302,7 @@ class Replicator:
             for h in held:  # our own replica is fenced too: a lapsed lease here stops us
                 if self.me in h.tokens:
                     self.locks.check(h.chunk, self.me, h.tokens[self.me])
-            apply_locally()
+            await apply_locally()
         finally:
             self.committing.discard(record.id)
         await faults.reached("commit.applied")
