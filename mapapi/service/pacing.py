@@ -31,7 +31,6 @@ its own process).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import gc
 import logging
 import sys
@@ -84,11 +83,10 @@ class Pacing:
 
     async def close(self) -> None:
         """Stop the periodic pass and put the old settings back."""
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
         if self._saved is not None:
             threshold, switch = self._saved
             gc.unfreeze()
