@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from functools import partial
 from typing import ParamSpec, TypeVar
 
 from mapapi.store.sqlite import SqliteStore
@@ -28,15 +29,15 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 
-def threaded(store: object) -> bool:
-    """Whether `store` may be used from a worker thread (every thread gets its own
-    SQLite connection)."""
-    return isinstance(store, SqliteStore)
-
-
 async def off_loop(store: object, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
     """`fn(*args, **kwargs)` run in a worker thread when `store` allows it (see
     the module docstring), else here; its result, or what it raised."""
-    if threaded(store):
-        return await asyncio.to_thread(fn, *args, **kwargs)
+    if isinstance(store, SqliteStore):
+        return await asyncio.to_thread(_in_worker, store, partial(fn, *args, **kwargs))
     return fn(*args, **kwargs)
+
+
+def _in_worker(store: SqliteStore, call: Callable[[], T]) -> T:
+    # The store's `close` waits while the function runs (a peer closing meanwhile).
+    with store.worker():
+        return call()
