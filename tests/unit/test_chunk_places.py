@@ -66,7 +66,7 @@ async def test_a_box_computed_off_the_loop_holds_what_was_applied_meanwhile(
     tx.insert(VERTICES, far, chunk)
 
     warming = asyncio.ensure_future(places.warm([chunk]))  # computes in a worker thread
-    await asyncio.sleep(0)  # it starts: the commit below may land before or after its read
+    await asyncio.sleep(0)  # sync-ok: a yield; the commit below lands before or after its read
     await tx.commit("a vertex far away, while the box is computed")
     await warming
 
