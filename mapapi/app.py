@@ -96,7 +96,12 @@ def run_daemon(
     ready: Callable[[PeerRecord], None] | None = None,
 ) -> None:
     """Serve the peer of `repo` in the foreground until a signal or `peer stop`
-    (`mapapi.service.daemon.run` with the application's peer and operations)."""
+    (`mapapi.service.daemon.run` with the application's peer and operations).
+
+    The map jobs' modules (numpy, the readers) are imported now: imported at
+    the first export, they would hold the event loop for a few hundred ms."""
+    import mapapi.maps.jobs  # noqa: F401
+
     daemon.run(
         repo,
         listen,

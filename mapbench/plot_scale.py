@@ -37,20 +37,14 @@ def plot_scale(results: Sequence[dict[str, Any]], output: str | Path) -> None:
     )
     styles = ("-", "--", ":", "-.")
     for n, result in enumerate(results):
-        tag = result.get("label") or result["graph"]
         counts = [p["missions"] for p in result["points"]]
         for k, read in enumerate(READS):
             seconds = [p["seconds"][read] for p in result["points"]]
-            reads.plot(
-                counts,
-                seconds,
-                marker=_MARKERS[read],
-                ls=styles[n % len(styles)],
-                color=f"C{k}",
-                label=f"{_LABELS[read]}: {tag}",
-            )
+            style = styles[n % len(styles)]
+            reads.plot(counts, seconds, marker=_MARKERS[read], ls=style, color=f"C{k}")
         per_mission = [p["store_bytes"] / 1e6 / p["missions"] for p in result["points"]]
-        size.plot(counts, per_mission, marker="o", ls=styles[n % len(styles)], label=tag)
+        size.plot(counts, per_mission, marker="o", ls=styles[n % len(styles)], label=_tag(result))
+    _legends(reads, results, styles)
     for read, target in TARGETS.items():
         text = f"target: {read} <= {target:g} s (10 missions)"
         _hline(reads, target, text, color="grey", ls=":")
@@ -61,7 +55,6 @@ def plot_scale(results: Sequence[dict[str, Any]], output: str | Path) -> None:
     reads.set_xlabel("missions held (copies of one graph)")
     reads.set_ylabel("seconds (median of runs)")
     reads.grid(alpha=0.3, which="both")
-    reads.legend(fontsize=6.5, loc="upper left", framealpha=0.9)
     first = results[0]
     reads.set_title(
         f"Read cost against missions held: {first['graph']} "
@@ -75,6 +68,27 @@ def plot_scale(results: Sequence[dict[str, Any]], output: str | Path) -> None:
     size.legend(fontsize=7)
     _save(fig, list(results), output)
     plt.close(fig)
+
+
+def _tag(result: dict[str, Any]) -> str:
+    return str(result.get("label") or result["graph"])
+
+
+def _legends(ax: Any, results: Sequence[dict[str, Any]], styles: Sequence[str]) -> None:
+    """One legend of the reads (colour, marker), one of the runs (line style)."""
+    from matplotlib.lines import Line2D
+
+    reads = [
+        Line2D([], [], color=f"C{k}", marker=_MARKERS[r], label=_LABELS[r])
+        for k, r in enumerate(READS)
+    ]
+    runs = [
+        Line2D([], [], color="black", ls=styles[n % len(styles)], label=_tag(result))
+        for n, result in enumerate(results)
+    ]
+    first = ax.legend(handles=reads, fontsize=7, loc="upper left", framealpha=0.9)
+    ax.add_artist(first)
+    ax.legend(handles=runs, fontsize=7, loc="lower right", framealpha=0.9)
 
 
 def _log_x(ax: Any, ticks: list[int]) -> None:

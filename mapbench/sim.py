@@ -97,7 +97,11 @@ class Sim:
         options: RaftOptions = SIM_OPTIONS,
         commits: bool = False,
     ) -> None:
-        self.seed, self.options = seed, options
+        self.seed = seed
+        # Half the seeds let idle groups go quiet (drawn apart, so the rest of a seed's
+        # run does not change with it).
+        quiet = random.Random(seed * 7907 + 3).random() < 0.5
+        self.options = replace(options, quiesce=options.quiesce or quiet)
         self.rng = random.Random(seed)
         self.faults = replace(faults) if faults else world(self.rng)  # heal() mutates it
         self.compact_after = compact_after or self.rng.choice([4, 16, 10**9])
@@ -189,10 +193,19 @@ class Sim:
             burst = 1 + self.rng.randrange(node.missed + 1)
             node.missed = 0
             for _ in range(min(burst, 3 * self.options.election_tick)):
-                node.raft.tick()
+                node.raft.tick(leader_alive=self._hears_leader(node))
                 self.after(node)
 
         return tick
+
+    def _hears_leader(self, node: SimNode) -> bool:
+        """The peer-level failure detector of a quiet follower: its leader's process
+        runs and reaches it (a perfect detector; a real one lags, which costs time,
+        never safety)."""
+        leader = self.nodes.get(node.raft.leader)
+        return (
+            leader is not None and self.usable(leader) and (leader.id, node.id) not in self.blocked
+        )
 
     def after(self, node: SimNode) -> None:
         """Check the node, then drive its Ready now or (sometimes) a little later."""

@@ -202,7 +202,8 @@ async def import_graph(
         MapImportError: the graph is not importable, or the mission exists already.
         ConflictError: someone committed a mission of the same name meanwhile.
     """
-    return await _import(peer, _prepare(rename(graph, mission, robot)), progress)
+    prepared = await peer.off_loop(_prepare, rename(graph, mission, robot))
+    return await _import(peer, prepared, progress)
 
 
 async def import_cloud(
@@ -214,7 +215,7 @@ async def import_cloud(
         MapImportError: no points, or the mission exists already.
         ConflictError: someone committed a mission of the same name meanwhile.
     """
-    return await _import(peer, _prepare(cloud), progress)
+    return await _import(peer, await peer.off_loop(_prepare, cloud), progress)
 
 
 async def import_missions(
@@ -233,8 +234,13 @@ async def import_missions(
         raise MapImportError(
             f"mission {', '.join(map(repr, clashes))} exists already; pass another name"
         )
-    prepared = [_prepare(source) for source in sources]
+    # building and encoding 100,000 rows takes seconds: not on the event loop (issue 14 §1)
+    prepared = await peer.off_loop(_prepare_all, sources)
     return [await _import(peer, p, progress) for p in prepared]
+
+
+def _prepare_all(sources: Sequence[MapSource]) -> list[_Prepared]:
+    return [_prepare(source) for source in sources]
 
 
 async def import_graphs(
@@ -276,7 +282,7 @@ async def _commit_rows(
         mission = rows[MISSIONS][0]
         assert isinstance(mission, Mission)
         mission.chunks.update(chunks)
-        _stage(tx, rows, chunks, progress)
+        await peer.off_loop(_stage, tx, rows, chunks, progress)  # encodes every row
         started = time.perf_counter()
         record = await tx.commit(f"import mission {name}: {summary}")
     except BaseException:

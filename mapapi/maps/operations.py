@@ -5,8 +5,10 @@ JSON in and out.
 (`mapapi.app` adds it to the service's), so these run in the peer daemon when
 one runs, like every other operation. File paths are the caller's; `mapctl`
 sends them absolute, since the daemon's working folder is not the caller's.
-Reading files and drawing run in a worker thread, so the peer keeps serving
-(and `import_progress` answers) meanwhile. The readers, which need numpy, are
+Reading and writing files and reading missions from the store run in worker
+threads (`mapapi.maps.stored`), and pictures are drawn in a process of their
+own (`mapapi.service.processes`), so the peer keeps serving (heartbeats, and
+`import_progress`) meanwhile (issue 14 §1). The readers, which need numpy, are
 imported when first used: every `mapctl` command imports this.
 
 `load_bbox` makes "load what lies in this box" one operation, so the CLI and
@@ -24,28 +26,26 @@ import fnmatch
 import json
 import os
 import time
-from collections.abc import Mapping
-from functools import partial
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from mapapi.core.errors import UsageError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
-from mapapi.maps.g2o import looks_planar, write_g2o
-from mapapi.maps.graph import MissionGraph
-from mapapi.maps.schema import MISSIONS
+from mapapi.maps.schema import CLOUDS, MISSIONS
 from mapapi.service.ops import Operation
+from mapapi.service.processes import in_process
 from mapapi.service.transfer_ops import online, placed_json
 
 if TYPE_CHECKING:
-    from mapapi.maps.cloud import PointCloud
     from mapapi.maps.importer import ImportResult
     from mapapi.maps.stored import MissionInfo
     from mapapi.net.messages import Member
     from mapapi.service.peer import Peer
 
 Json = Any
+T = TypeVar("T")
 
 
 def _box(box: BBox | None) -> list[float] | None:
@@ -143,27 +143,15 @@ class MapOperations:
 
     async def export_map(self, mission: str, path: str) -> Json:
         """Write a mission to a file: a graph as g2o (2D when it is planar), a
-        cloud as PLY or PCD, by the extension."""
-        from mapapi.maps.cloud_file import CLOUD_FORMATS, write_cloud
-        from mapapi.maps.stored import load_cloud, load_graph
+        cloud as PLY or PCD, by the extension (`mapapi.maps.jobs.export_mission`)."""
+        from mapapi.maps.jobs import export_mission, export_reads
+        from mapapi.maps.stored import read_time
 
         target = _absolute(path)
+        reads = export_reads(target)
+        async with read_time(self.peer, [mission], reads) as at:
+            counts = await self._job(export_mission, at, mission, target)
         fmt = target.suffix.lower().lstrip(".")
-        if fmt == "g2o":
-            graph = await load_graph(self.peer, mission)
-            if not graph.vertices:
-                raise UsageError(f"mission {mission!r} has no pose graph; export it as .ply")
-            written = await asyncio.to_thread(_write_graph, graph, target)
-            # edges to other missions' vertices have no place in a one-mission g2o file
-            left_out = len(graph.edges) - written
-            counts = {"vertices": len(graph.vertices), "edges": written, "left_out": left_out}
-        elif fmt in CLOUD_FORMATS:
-            cloud = await load_cloud(self.peer, mission)
-            if len(cloud.points) == 0:
-                raise UsageError(f"mission {mission!r} has no point cloud; export it as .g2o")
-            counts = {"points": await asyncio.to_thread(write_cloud, cloud, target)}
-        else:
-            raise UsageError(f"export to a .g2o, .ply or .pcd file, not {target.name!r}")
         return {"mission": mission, "path": str(target), "format": fmt, **counts}
 
     async def missions(self, swarm: bool = False) -> Json:
@@ -208,6 +196,17 @@ class MapOperations:
         member = known.get(peer_id)
         return member_json(member) if member else {"id": peer_id, "name": "", "address": address}
 
+    async def _job(self, job: Callable[..., T], *args: Any) -> T:
+        """Run a long map job (`mapapi.maps.jobs`) off the event loop: in a process
+        of its own that opens the store, while this peer serves a swarm (its
+        heartbeats must keep their pace: issue 14 §1); else in a worker thread."""
+        from mapapi.maps.jobs import in_repository
+
+        store = getattr(self.peer.store, "path", None)
+        if self.peer.swarm is None or not isinstance(store, Path):
+            return await self.peer.off_loop(job, self.peer, *args)
+        return await in_process(in_repository, store, job, *args)
+
     async def plot_map(
         self,
         path: str,
@@ -222,27 +221,14 @@ class MapOperations:
         (default: every mission held here, or those overlapping `bbox`), with
         `bbox` outlined; `zoom` shows the box and its surroundings only;
         `labels` maps a mission's name to its legend entry."""
-        from mapapi.maps.plot import plot_map
-        from mapapi.maps.stored import list_missions, load_cloud, load_graph
+        from mapapi.maps.jobs import draw_missions
+        from mapapi.maps.stored import GRAPH_READ, list_missions, read_time
 
         box = None if bbox is None else BBox.from_tuple(bbox)
-        chosen = _choose(await list_missions(self.peer), missions, box)
-        graphs: list[MissionGraph] = []
-        clouds: list[PointCloud] = []
-        for info in chosen:
-            if info.kind == "cloud":
-                clouds.append(await load_cloud(self.peer, info.name))
-            else:
-                graphs.append(await load_graph(self.peer, info.name))
+        chosen = [(i.name, i.kind) for i in _choose(await list_missions(self.peer), missions, box)]
         target = _absolute(path)
-        drawn = await asyncio.to_thread(
-            partial(plot_map, zoom=zoom, title=title, labels=labels),
-            target,
-            graphs,
-            clouds,
-            box,
-            up,
-        )
+        async with read_time(self.peer, [name for name, _ in chosen], (*GRAPH_READ, CLOUDS)) as at:
+            drawn = await self._job(draw_missions, at, chosen, target, box, up, zoom, title, labels)
         return {
             "path": str(target),
             "renderer": drawn.renderer,
@@ -269,7 +255,7 @@ class MapOperations:
         try:
             loaded += [await self._load(key, chunk, todo) for chunk in todo]
             names = {name for r in found for name in r["missions"]}
-            held = {c.id for c in self.peer.chunks()}
+            held = set(self.peer.store.chunk_ids())
             parts = await mission_chunks(self.peer, names)
             more = sorted({c for tables in parts.values() for c in tables.values()} - held)
             todo += more
@@ -287,7 +273,7 @@ class MapOperations:
         peer = online(self.peer)
         table = await peer.participate(chunk)
         self._loads[key] = (todo.index(chunk) + 1, len(todo))
-        items = next((c.items for c in peer.chunks() if c.id == chunk), 0)
+        items = next((c.items for c in await peer.off_loop(peer.chunks) if c.id == chunk), 0)
         return {"chunk": chunk, "table": table, "items": items}
 
     async def load_progress(self, bbox: list[float], table: str | None = None) -> Json:
@@ -301,11 +287,6 @@ class MapOperations:
 def _absolute(path: str) -> Path:
     """`path` from the caller's folder (the CLI sends absolute paths)."""
     return Path(os.path.abspath(os.path.expanduser(path)))
-
-
-def _write_graph(graph: MissionGraph, target: Path) -> int:
-    with target.open("w", encoding="utf-8") as out:
-        return write_g2o(graph, out, planar=looks_planar(graph))
 
 
 def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:

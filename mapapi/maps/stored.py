@@ -5,12 +5,17 @@ store's label index, only that mission's rows are read, however many missions
 the store holds. Reads of rows go through one transaction, so a mission is
 consistent as of one logical time even while others commit; the listing's
 counts and boxes are the summaries the store keeps up to date at every commit.
+
+Reading a mission of 100,000 rows takes seconds of decoding: the async readers
+do it in a worker thread (`Peer.off_loop`), and the sync ones (`graph_at`,
+`cloud_at`, at a time `read_time` gives) in whatever thread or process calls
+them (`mapapi.maps.jobs`), so a serving peer's event loop keeps answering.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator, Iterable, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -32,6 +37,7 @@ from mapapi.maps.schema import (
 )
 
 if TYPE_CHECKING:
+    from mapapi.core.history import Revision
     from mapapi.core.transaction import Transaction
     from mapapi.service.peer import Peer
 
@@ -78,18 +84,36 @@ async def mission_names(tx: Transaction) -> set[str]:
     return {str(getattr(m, "name", "")) for m in (await tx.items(MISSIONS)).values()}
 
 
-async def _rows_of(peer: Peer, tx: Transaction, table: str, mission: str) -> list[Any]:
-    """The mission's rows of `table` that `tx` sees, decoded, by id."""
+def _rows_of(peer: Peer, time: int, table: str, mission: str) -> list[Any]:
+    """The mission's rows of `table` visible at `time`, decoded, by id."""
     if table not in peer.store.tables():
         return []
     decode = peer.table(table).decode
-    return [
-        decode(r.data) for r in await peer.scan_labelled(tx.begin_time, MAP_LABELS, mission, table)
-    ]
+    return [decode(r.data) for r in peer.scan_labelled_now(time, MAP_LABELS, mission, table)]
 
 
-async def _mission_row(peer: Peer, tx: Transaction, mission: str) -> Any:
-    found = await _rows_of(peer, tx, MISSIONS, mission)
+GRAPH_READ = (MISSIONS, VERTICES, EDGES)
+"""The tables `graph_at` reads."""
+
+CLOUD_READ = (MISSIONS, CLOUDS)
+"""The tables `cloud_at` reads."""
+
+
+@asynccontextmanager
+async def read_time(
+    peer: Peer, missions: Iterable[str], tables: Sequence[str]
+) -> AsyncIterator[int]:
+    """A time to read `missions` at (their rows of `tables`), at which their
+    chunks read as every replica will from now on, so no commit at or before it
+    can still arrive there (`Peer.labelled_readable`): the sync readers below
+    (`graph_at`, `cloud_at`) read at it from any thread or process. A read-only
+    transaction stays open until the block ends."""
+    async with reading(peer) as tx:
+        yield await peer.labelled_readable(MAP_LABELS, list(missions), tables, tx.begin_time)
+
+
+def _mission_row(peer: Peer, time: int, mission: str) -> Any:
+    found = _rows_of(peer, time, MISSIONS, mission)
     if not found:
         raise MapImportError(
             f"no mission {mission!r} here; `mapctl missions` lists them, "
@@ -103,14 +127,24 @@ async def load_graph(peer: Peer, mission: str) -> MissionGraph:
     insertion order: by insertion time, then their line in the imported file
     (vertices without one first, by index), then id. Every peer holding the
     mission thus reads the same graph in the same order (`write_g2o` keeps it).
+    The rows are read and decoded in a worker thread (`Peer.off_loop`).
 
     Raises:
         MapImportError: no such mission.
     """
-    async with reading(peer) as tx:
-        row = await _mission_row(peer, tx, mission)
-        vertices = await _in_order(peer, tx, VERTICES, mission)
-        edges = await _in_order(peer, tx, EDGES, mission)
+    async with read_time(peer, [mission], GRAPH_READ) as time:
+        return await peer.off_loop(graph_at, peer, time, mission)
+
+
+def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
+    """`load_graph` at `time` (from `read_time`), in any thread (it only reads the store).
+
+    Raises:
+        MapImportError: no such mission.
+    """
+    row = _mission_row(peer, time, mission)
+    vertices = _in_order(peer, time, VERTICES, mission)
+    edges = _in_order(peer, time, EDGES, mission)
     graph = MissionGraph(mission, row.robot, row.frame)
     records = [(key, 0, v) for key, v in vertices] + [(key, 1, e) for key, e in edges]
     records.sort(key=lambda record: (record[0][0], record[0][1], record[1], record[0][2:]))
@@ -125,8 +159,8 @@ async def load_graph(peer: Peer, mission: str) -> MissionGraph:
     return graph
 
 
-async def _in_order(
-    peer: Peer, tx: Transaction, table: str, mission: str
+def _in_order(
+    peer: Peer, time: int, table: str, mission: str
 ) -> list[tuple[tuple[int, int, int, str], Any]]:
     """The mission's rows of `table` with their sort keys: (insertion time,
     line, index (vertices), id)."""
@@ -134,7 +168,7 @@ async def _in_order(
         return []
     decode = peer.table(table).decode
     rows = []
-    for revision in await peer.scan_labelled(tx.begin_time, MAP_LABELS, mission, table):
+    for revision in peer.scan_labelled_now(time, MAP_LABELS, mission, table):
         message: Any = decode(revision.data)
         index = message.index if table == VERTICES else 0
         key = (revision.insert_time, message.origin.line, index, str(revision.item_id))
@@ -143,14 +177,24 @@ async def _in_order(
 
 
 async def load_cloud(peer: Peer, mission: str) -> PointCloud:
-    """Read a stored mission's point cloud back (its points in block order).
+    """Read a stored mission's point cloud back (its points in block order), in a
+    worker thread.
 
     Raises:
         MapImportError: no such mission.
     """
-    async with reading(peer) as tx:
-        row = await _mission_row(peer, tx, mission)
-        blocks = await _rows_of(peer, tx, CLOUDS, mission)
+    async with read_time(peer, [mission], CLOUD_READ) as time:
+        return await peer.off_loop(cloud_at, peer, time, mission)
+
+
+def cloud_at(peer: Peer, time: int, mission: str) -> PointCloud:
+    """`load_cloud` at `time` (from `read_time`), in any thread.
+
+    Raises:
+        MapImportError: no such mission.
+    """
+    row = _mission_row(peer, time, mission)
+    blocks = _rows_of(peer, time, CLOUDS, mission)
     return cloud_from_blocks(mission, row.robot, row.frame, blocks)
 
 
@@ -160,8 +204,8 @@ async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str
     wanted = set(names)
     if not wanted or MISSIONS not in peer.store.tables():
         return {}
-    async with reading(peer) as tx:
-        rows = [row for name in sorted(wanted) for row in await _rows_of(peer, tx, MISSIONS, name)]
+    async with read_time(peer, sorted(wanted), (MISSIONS,)) as time:
+        rows = await peer.off_loop(_mission_rows, peer, time, sorted(wanted))
     found: dict[str, dict[str, ChunkId]] = {}
     for row in rows:
         found[row.name] = {}
@@ -171,6 +215,10 @@ async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str
             except ValueError:  # a row written by hand, not by an import
                 log.warning("mission %s names no chunk id for %s: %r", row.name, table, chunk)
     return found
+
+
+def _mission_rows(peer: Peer, time: int, names: list[str]) -> list[Any]:
+    return [row for name in names for row in _rows_of(peer, time, MISSIONS, name)]
 
 
 async def list_missions(peer: Peer) -> list[MissionInfo]:
@@ -184,6 +232,11 @@ async def list_missions(peer: Peer) -> list[MissionInfo]:
         return []
     async with reading(peer) as tx:
         rows = await peer.scan(tx.begin_time, MISSIONS, None)
+    return await peer.off_loop(_missions_of, peer, rows)
+
+
+def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
+    """The missions of their rows, with the store's summaries (in a worker thread)."""
     decode = peer.table(MISSIONS).decode
     infos: dict[str, MissionInfo] = {}
     for revision in rows:

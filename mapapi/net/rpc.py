@@ -40,9 +40,9 @@ T = TypeVar("T")
 K = TypeVar("K", bound=Hashable)
 
 DEFAULT_TIMEOUT = 5.0
+"""Seconds a request waits for its reply unless told otherwise (DESIGN §11)."""
 # What to do when this peer's own side closes (`peer stop`, a shutdown) under a request.
 _CLOSING = "wait for this peer to stop, then start it again (`mapctl peer start --detach`)"
-"""Seconds a request waits for its reply unless told otherwise (DESIGN §11)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,7 +84,7 @@ class Rpc:
         self.default_timeout = default_timeout
         self._handlers: dict[type, Handler] = {}
         self._pending: dict[int, tuple[str, asyncio.Future[object]]] = {}
-        self._tasks: set[asyncio.Task[None]] = set()
+        self._tasks: set[asyncio.Task[object]] = set()
         self._ids = itertools.count(1)
         self._closed = False
         self.on_seen = on_seen
@@ -273,11 +273,13 @@ class Rpc:
             self._answer(msg, self._failure(msg, exc))
             return
         if inspect.isawaitable(result):
-            task = asyncio.get_running_loop().create_task(
-                self._serve(msg, result), name=f"rpc {env.body_name} from {msg.route.peer}"
-            )
+            # The task runs the handler's coroutine itself: if close() cancels it before
+            # its first step the coroutine is closed (a wrapper would drop it unawaited).
+            task = asyncio.ensure_future(result)
+            task.set_name(f"rpc {env.body_name} from {msg.route.peer}")
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
+            task.add_done_callback(lambda done: self._served(msg, done))
         else:
             self._answer(msg, result)
 
@@ -293,9 +295,11 @@ class Rpc:
 
     # -- serving ---------------------------------------------------------------
 
-    async def _serve(self, msg: Inbound, pending: Awaitable[object]) -> None:
+    def _served(self, msg: Inbound, task: asyncio.Task[object]) -> None:
+        if task.cancelled():
+            return  # closing: the requester's own deadline covers it
         try:
-            result = await pending
+            result = task.result()
         except Exception as exc:
             result = self._failure(msg, exc)
         self._answer(msg, result)
@@ -377,6 +381,7 @@ async def ask_all(calls: Mapping[K, Awaitable[T]]) -> Answers[K, T]:
     """Run `calls` (requests to several peers, say, keyed by peer) at once and
     wait for every one; a call failing with a MapError does not stop the others.
     The caller then raises the first failure (`Answers.raise_first`) or logs them.
+    Give each call its own key: a dict comprehension repeating one drops a call unawaited.
 
     Raises:
         Exception: the first failure that is no MapError (a bug), once every call

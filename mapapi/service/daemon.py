@@ -28,6 +28,7 @@ from mapapi.core.errors import MapError
 from mapapi.service import known_peers
 from mapapi.service.daemon_process import LOG_ENV, refuse_if_running
 from mapapi.service.loop_lag import LoopLag
+from mapapi.service.pacing import Pacing
 from mapapi.service.peer_lock import PeerLock
 from mapapi.service.repo import PeerRecord
 from mapapi.swarm import faults
@@ -161,6 +162,8 @@ async def serve(
     lock = PeerLock.acquire(repo)
     lag = LoopLag()  # how late the loop runs: `peer status` (issue 14 §1)
     lag.start()
+    pacing = Pacing()  # and what keeps it on time (issue 14 §1)
+    pacing.start()
     try:
         peer = open_peer(repo)
         control = ControlServer(operations(peer, on_shutdown=stop.set, loop_lag=lag))
@@ -169,6 +172,7 @@ async def serve(
         try:
             record = await _go_live(repo, control, listen, join, advertise)
             keeper = asyncio.get_running_loop().create_task(_keep_members(repo, peer))
+            pacing.settle()
             if ready is not None:
                 ready(record)
             await stop.wait()
@@ -183,6 +187,7 @@ async def serve(
             if record is not None:
                 repo.remove_peer_record(record.pid)
     finally:
+        await pacing.close()
         await lag.close()
         lock.release()
 

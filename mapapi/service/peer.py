@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import ChunkNotFound, NotParticipatingError, UsageError
@@ -25,7 +25,7 @@ from mapapi.lookup.spatial_index import QueryStats
 from mapapi.service.fsck import rollback_text
 from mapapi.service.repo import Repository
 from mapapi.service.tables import Tables
-from mapapi.store import ChunkInfo, MemoryStore
+from mapapi.store import ChunkInfo, MemoryStore, offload
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm import reading
 from mapapi.swarm.commit import commit_locally, refuse_shared
@@ -33,7 +33,7 @@ from mapapi.swarm.placed import Here, PlacedChunk, query_bbox
 from mapapi.swarm.triggers import Callback, Triggers
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
 
     from google.protobuf.message import Message
 
@@ -50,6 +50,9 @@ if TYPE_CHECKING:
     from mapapi.swarm.subscriptions import Subscription, SubscriptionSpec
 
 log = logging.getLogger(__name__)
+
+P = ParamSpec("P")
+T = TypeVar("T")
 
 
 class Peer:
@@ -375,8 +378,33 @@ class Peer:
     ) -> list[Revision]:
         """The items of `table` labelled `label` by `labels` visible at `time`, by
         id: from the store's index when it keeps one of `labels` (only those rows
-        are read), else filtered from the table's rows (`mapapi.store.labels`)."""
+        are read), else filtered from the table's rows (`mapapi.store.labels`);
+        read in a worker thread."""
         return await reading.scan_labelled(self.store, self.swarm, labels, time, label, table)
+
+    async def labelled_readable(
+        self, labels: Labels, names: Sequence[str], tables: Sequence[str], time: int
+    ) -> int:
+        """A time at or after `time` at which `scan_labelled_now` reads the rows
+        of `tables` labelled with `names` as every replica will from now on
+        (`mapapi.swarm.reading.labelled_readable`)."""
+        moved = await reading.labelled_readable(self.store, self.swarm, labels, names, tables, time)
+        self.clock.advance_to(moved)
+        return moved
+
+    def scan_labelled_now(
+        self, time: int, labels: Labels, label: str, table: str
+    ) -> list[Revision]:
+        """`scan_labelled` without making chunks final (after `labelled_readable`),
+        from any thread: for functions run with `off_loop`."""
+        return reading.scan_labelled_now(self.store, labels, time, label, table)
+
+    async def off_loop(self, fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
+        """`fn(*args, **kwargs)` in a worker thread with its own connection to the
+        store, so the peer keeps serving while it runs (`mapapi.store.offload`;
+        on a memory store it runs here). `fn` may read and write the store but
+        must not touch asyncio objects: it returns its result."""
+        return await offload.off_loop(self.store, fn, *args, **kwargs)
 
     def label_summaries(
         self, labels: Labels, only: Sequence[str] | None = None

@@ -100,7 +100,7 @@ class SwarmOperations:
             "join": peer.address,
             "pid": os.getpid(),
             "members": members,
-            "chunks": len(peer.chunks()),
+            "chunks": len(peer.store.chunk_ids()),
             "diverged": [divergence_json(d) for d in peer.store.divergences()],
             "rollback": [rollback_text(r) for r in peer.store.rollbacks()],
             "loop_lag_ms": None if self.loop_lag is None else self.loop_lag.summary().as_json(),
@@ -155,7 +155,7 @@ class SwarmOperations:
             table = await peer.participate(chunk_id, report, again=True)
         finally:
             self._progress.pop(chunk, None)
-        items = next((c.items for c in peer.chunks() if c.id == chunk_id), 0)
+        items = next((c.items for c in await peer.off_loop(peer.chunks) if c.id == chunk_id), 0)
         return {
             "chunk": chunk_id,
             "table": table,

@@ -121,6 +121,10 @@ class Store(Protocol):
     def chunks(self, table: str | None = None) -> list[ChunkInfo]:
         """The chunks held here, optionally of one table."""
 
+    def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
+        """The ids of `chunks(table)`, in order, without counting their items
+        (which reads every revision)."""
+
     def chunk_table(self, chunk_id: ChunkId) -> str:
         """The table of a chunk; raises ChunkNotFound."""
 

@@ -84,6 +84,10 @@ class MemoryStore(MemoryChains):
             if table is None or t == table
         ]
 
+    def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
+        """The ids of `chunks(table)`, in order, without counting their items."""
+        return [cid for cid, t in sorted(self._chunks.items()) if table is None or t == table]
+
     def chunk_table(self, chunk_id: ChunkId) -> str:
         """The table of a chunk."""
         try:

@@ -47,6 +47,7 @@ class SqliteStore(SqliteChains):
         self._db = Connections(self.path, self.mark.committed, self.mark.rolled_back)
         self._con = self._db.con
         self._write = self._db.write
+        self.worker = self._db.worker  # a worker thread's use, which `close` waits for
         try:
             sqlite_schema.setup(self._db, create)
         except CorruptRepoError:
@@ -61,7 +62,7 @@ class SqliteStore(SqliteChains):
             ) from exc
 
     def close(self) -> None:
-        """Close every connection opened by any thread."""
+        """Close every connection of any thread, once no `worker` thread runs."""
         self._db.close()
 
     def clock(self) -> int:
@@ -112,6 +113,11 @@ class SqliteStore(SqliteChains):
             GROUP BY c.id ORDER BY c.id"""
         rows = self._con().execute(sql, (table, table))
         return [ChunkInfo(ChunkId(cid), t, n) for cid, t, n in rows]
+
+    def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
+        """The ids of `chunks(table)`, in order, without counting their items."""
+        sql = "SELECT id FROM chunks WHERE ? IS NULL OR table_name = ? ORDER BY id"
+        return [ChunkId(cid) for (cid,) in self._con().execute(sql, (table, table))]
 
     def chunk_table(self, chunk_id: ChunkId) -> str:
         """The table of a chunk."""

@@ -19,6 +19,10 @@ from mapapi.store.file_check import storage_error
 BUSY_TIMEOUT_MS = 30_000
 
 
+CLOSE_WAIT = 60.0
+"""Seconds `Connections.close` waits for worker threads still reading."""
+
+
 class Connections:
     """Every thread's connection to the store file at `path`.
 
@@ -40,6 +44,8 @@ class Connections:
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._all_lock = threading.Lock()
+        self._idle = threading.Condition(self._all_lock)  # no worker thread reads
+        self._workers = 0
 
     def con(self) -> sqlite3.Connection:
         """This thread's connection (opened on first use)."""
@@ -89,9 +95,25 @@ class Connections:
         if self._on_commit is not None:
             self._on_commit(con)
 
+    @contextmanager
+    def worker(self) -> Iterator[None]:
+        """Mark the calling worker thread as using the store until the block ends:
+        `close` waits for it (closing a connection while another thread reads
+        through it crashes SQLite's module)."""
+        with self._idle:
+            self._workers += 1
+        try:
+            yield
+        finally:
+            with self._idle:
+                self._workers -= 1
+                self._idle.notify_all()
+
     def close(self) -> None:
-        """Close every connection opened by any thread."""
-        with self._all_lock:
+        """Close every connection opened by any thread, once no worker uses one
+        (waiting at most `CLOSE_WAIT` seconds)."""
+        with self._idle:
+            self._idle.wait_for(lambda: self._workers == 0, timeout=CLOSE_WAIT)
             for con in self._all:
                 con.close()
             self._all.clear()

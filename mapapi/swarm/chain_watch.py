@@ -169,7 +169,8 @@ class ChainWatch:
     def _compare(self, chunk: ChunkId, peer: PeerId, count: int, link: bytes) -> bool:
         """Compare `peer`'s link of the chunk's `count`-th commit with ours; whether
         they differ (False when we cannot tell: we have fewer commits)."""
-        mine = self.store.chain_at(chunk, count) if count > 0 else None
+        # A count past any chain (a hostile peer's, up to 2**64) matches no link here.
+        mine = self.store.chain_at(chunk, count) if 0 < count < 1 << 62 else None
         if mine is None:
             return False
         known = next(

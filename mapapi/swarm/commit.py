@@ -51,15 +51,36 @@ def _decide(
         ConflictError: with (base, ours, theirs) for every conflicting item.
         UsageError: a rule refuses the accepted changes.
     """
+    try:
+        accepted, latest = _checked(store, tx, try_merge, rules)
+    finally:
+        clock.advance_to(store.clock())
+    if not accepted:
+        return Decision(None, [])
+    return _stamped(tx, message, accepted, latest, clock.tick())
+
+
+def _checked(
+    store: Store, tx: Transaction, try_merge: MergeFn | None, rules: Sequence[CommitRule]
+) -> tuple[list[Change], dict[ItemId, Revision]]:
+    """The changes of `tx` that validation accepts (all, or ConflictError), once
+    `rules` accept them, with the newest revisions of their items (any thread)."""
     accepted, latest, conflicts = _validate(store, tx, try_merge)
-    clock.advance_to(store.clock())
     if conflicts:
         raise ConflictError(conflicts, tx, seen_at=store.clock())
     for rule in rules:
         rule.check(store, accepted)
-    if not accepted:
-        return Decision(None, [])
-    time = clock.tick()
+    return accepted, latest
+
+
+def _stamped(
+    tx: Transaction,
+    message: str,
+    accepted: list[Change],
+    latest: dict[ItemId, Revision],
+    time: int,
+) -> Decision:
+    """The commit of the `accepted` changes at `time`: its record and revisions."""
     chunks = tuple(sorted({c.chunk_id for c in accepted}))
     record = CommitRecord(CommitId.new(), time, tx.author, message, chunks, tx.author_name, tx.view)
     return Decision(record, build_revisions(accepted, latest, time, tx.author, record.id))

@@ -21,6 +21,7 @@ import contextlib
 import logging
 import random
 from collections.abc import Callable, Iterable
+from dataclasses import replace
 from functools import partial
 
 from mapapi.core.errors import CorruptRepoError, NotChunkLeader, PeerUnavailable, RequestTimeout
@@ -58,8 +59,7 @@ from mapapi.swarm.raft_wire import node_id, rows, state_of
 log = logging.getLogger(__name__)
 
 TICK_SECONDS = 0.05
-"""Seconds per Raft tick: with the core's election timeout of 10-20 ticks, a dead
-leader is replaced in 0.5-1 s, and heartbeats leave every 50 ms."""
+"""Seconds per Raft tick: a dead leader is replaced in 0.5-1 s (10-20 ticks)."""
 PROPOSE_TIMEOUT = 5.0
 """Seconds a proposal waits to be committed and applied."""
 COMPACT_AFTER = 1000
@@ -77,14 +77,12 @@ class RaftGroups:
         apply: applies a committed entry's effect to the store.
         peers: every peer a node id may stand for (the member list), to map ids back.
         options: the core's tunables; `seed` makes election timeouts reproducible.
-        on_change: called after every round of the Ready loop that changed a
-            group's role or leader, or sent messages (so waiters re-check).
-        states: takes and installs chunks' states as snapshots
-            (`swarm/chunk_state.py`); without it logs are never compacted and a
-            snapshot cannot be installed.
-        compact_after: entries applied past the last snapshot before compacting.
+        on_change: called after each Ready round that changed a role, a leader or sent.
+        states: takes and installs chunks' states as snapshots (without it, logs
+            are never compacted); `compact_after` entries past the last one.
         on_members: called with a group's members (the peers it can name) each
             time a configuration change takes effect here.
+        alive: the peer-level failure detector; with it idle groups go quiet.
     """
 
     def __init__(
@@ -101,8 +99,10 @@ class RaftGroups:
         states: StoreStates | None = None,
         compact_after: int = COMPACT_AFTER,
         on_members: Callable[[ChunkId, list[PeerId]], None] | None = None,
+        alive: Callable[[PeerId], bool] | None = None,
     ) -> None:
         self.me = me
+        self._alive = alive
         self.states = states
         self.compact_after = compact_after
         self._on_members = on_members
@@ -110,7 +110,7 @@ class RaftGroups:
         self.rpc = rpc
         self.mail = RaftMail(rpc, address, peers)
         self._apply = apply
-        self._options = options or RaftOptions()
+        self._options = replace(options or RaftOptions(), quiesce=alive is not None)
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
         self._groups: dict[ChunkId, GroupState] = {}
@@ -213,8 +213,7 @@ class RaftGroups:
 
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
-        kept = self.store.raft_load(chunk)
-        return 0 if kept is None else kept.applied
+        return 0 if (kept := self.store.raft_load(chunk)) is None else kept.applied
 
     # -- proposing ---------------------------------------------------------------------
     async def propose(
@@ -341,7 +340,8 @@ class RaftGroups:
         while True:
             await asyncio.sleep(tick)
             for group in list(self._groups.values()):
-                group.node.tick()
+                leader = self._peer(group.leader)  # a quiet follower asks after it
+                group.node.tick(self._alive is None or leader is None or self._alive(leader))
                 with contextlib.suppress(CorruptRepoError):  # halted: logged, and gone
                     self._process(group)
             self._flush()

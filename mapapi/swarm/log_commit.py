@@ -40,6 +40,7 @@ from mapapi.core.proposal import LogEntry, Proposal, TimeFloor, TxDecision
 from mapapi.core.transaction import Transaction
 from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
+from mapapi.store.offload import off_loop
 from mapapi.swarm import faults
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.commit_check import CommitRule, check_proposal
@@ -116,8 +117,9 @@ class LogCommits:
         """
         if not tx.changes:
             return Committed(None, ())
-        for rule in self.rules:  # over the whole transaction, on this peer's replicas
-            rule.check(self.groups.store, tx.changes)
+        store = self.groups.store
+        for rule in self.rules:  # over the whole transaction, on this peer's replicas,
+            await off_loop(store, rule.check, store, tx.changes)  # in a worker (issue 14)
         chunks = self._chunks_of(tx)
         if len(chunks) < 2:
             (chunk,) = chunks

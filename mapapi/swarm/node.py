@@ -123,6 +123,8 @@ class Swarm:
             peers=lambda: [m.id for m in self.members.all()],
             states=StoreStates(store),
             on_members=store.set_holders,
+            # idle groups go quiet while the failure detector hears their leaders
+            alive=lambda peer: self.liveness.answers(peer),
         )
         self.liveness = Liveness(self.rpc, self.members, store, liveness)
         self.log = LogCommits(
@@ -216,9 +218,9 @@ class Swarm:
             timeout=options.timeout,
         )
         self.advertise(address)
-        for info in self._store.chunks():  # every group resumes; a chunk held alone gets one
-            if not self.groups.resume(info.id):
-                self.ensure_group(info.id)
+        for chunk in self._store.chunk_ids():  # every group resumes; one held alone gets one
+            if not self.groups.resume(chunk):
+                self.ensure_group(chunk)
         self.groups.start()
         self.tx_recovery.start()
         every = min(1.0, self.liveness.options.remove_after / 4)

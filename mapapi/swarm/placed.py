@@ -59,11 +59,11 @@ async def query_bbox(
     if here.swarm is not None and here.swarm.index is not None:
         for ref in await here.swarm.index.query(box, table, stats=stats):
             found[ref.chunk] = ref
-    for ref in here.places.placed():  # what is held here is current
+    for ref in await here.places.placed():  # what is held here is current
         inside = here.grid.clamp(ref.bbox) is not None  # as the index would have it
         if inside and ref.bbox.overlaps(box) and table in (None, ref.table):
             found[ref.chunk] = ref
-    held = {c.id for c in here.store.chunks()}
+    held = set(here.store.chunk_ids())
     return [_holders_of(here, found[c], c in held) for c in sorted(found)]
 
 

@@ -104,15 +104,27 @@ class RaftNode(Leader):
         self._outstanding = False
         self._election_elapsed = self._heartbeat_elapsed = 0
         self._timeout = self.options.election_tick
+        self.quiet = False  # an idle group: no heartbeats, no election timer (see `tick`)
         self._reset(self.term)
 
     # -- inputs ------------------------------------------------------------------------------
 
-    def tick(self) -> None:
-        """Advance logical time by one tick."""
+    def tick(self, leader_alive: bool = True) -> None:
+        """Advance logical time by one tick.
+
+        With `RaftOptions.quiesce`, a leader whose followers all hold every entry
+        tells them to go quiet and stops sending heartbeats; a quiet follower keeps
+        its election timer stopped while `leader_alive` (the driver's peer-level
+        failure detector still hears the leader's peer), so a thousand idle groups
+        cost nothing. Any proposal, read or message wakes the group again.
+        """
         if self.role is Role.LEADER:
             self._tick_leader()
             return
+        if self.quiet:
+            if leader_alive:
+                return
+            self.quiet = False  # the leader's peer went silent: the timer runs again
         self._election_elapsed += 1
         if self._promotable() and self._election_elapsed >= self._timeout:
             self._election_elapsed = 0
@@ -163,6 +175,7 @@ class RaftNode(Leader):
             NotLeader: no leader is known to forward to.
         """
         if self.role is Role.LEADER:
+            self._wake()
             self._leader_read(ReadRequest(self.log.committed, context, self.id))
         elif self.leader == NONE:
             raise NotLeader(NONE)
@@ -171,6 +184,8 @@ class RaftNode(Leader):
 
     def step(self, m: Message) -> None:
         """Handle a message from another member (any order, duplicates, stale terms)."""
+        if self.quiet and self.role is Role.LEADER:
+            self._wake()  # a follower speaks: it missed the quiesce, or wants something
         if m.term > self.term:
             if m.kind in _RESPONSE and self._in_lease():
                 # A leader was heard from within the election timeout: ignore a disruptive
@@ -178,12 +193,12 @@ class RaftNode(Leader):
                 return
             if m.kind is M.PRE_VOTE or (m.kind is M.PRE_VOTE_RESP and not m.reject):
                 pass  # a pre-vote never changes terms: m.term is the one it would run for
-            elif m.kind in (M.APP, M.HEARTBEAT, M.SNAP):
+            elif m.kind in (M.APP, M.HEARTBEAT, M.SNAP, M.QUIESCE):
                 self._become_follower(m.term, m.sender)
             else:
                 self._become_follower(m.term, NONE)
         elif m.term < self.term:
-            if m.kind in (M.APP, M.HEARTBEAT):
+            if m.kind in (M.APP, M.HEARTBEAT, M.QUIESCE):
                 # A stale leader, perhaps cut off while we raised our term; with CheckQuorum
                 # we would not raise it on its vote requests, so tell it our term instead.
                 self._send(M.APP_RESP, m.sender)
@@ -278,6 +293,7 @@ class RaftNode(Leader):
         if term != self.term:
             self.term, self.vote = term, NONE
         self.leader = NONE
+        self.quiet = False
         self._election_elapsed = self._heartbeat_elapsed = 0
         # Randomised timeouts in [T, 2T) make split votes rare (paper §5.2).
         n = self.options.election_tick
@@ -376,7 +392,7 @@ class RaftNode(Leader):
             self._send(_RESPONSE[m.kind], m.sender, reject=True)
 
     def _step_candidate(self, m: Message) -> None:
-        if m.kind in (M.APP, M.HEARTBEAT, M.SNAP):
+        if m.kind in (M.APP, M.HEARTBEAT, M.SNAP, M.QUIESCE):
             self._become_follower(self.term, m.sender)
             self._step_follower(m)
             return
@@ -386,10 +402,13 @@ class RaftNode(Leader):
             self._poll()
 
     def _step_follower(self, m: Message) -> None:
-        if m.kind in (M.APP, M.HEARTBEAT, M.SNAP):
+        if m.kind in (M.APP, M.HEARTBEAT, M.SNAP, M.QUIESCE):
             self._election_elapsed = 0
             self.leader = m.sender
-        if m.kind is M.APP:
+            self.quiet = m.kind is M.QUIESCE
+        if m.kind is M.QUIESCE:
+            self._commit_to(m.commit)  # no answer: an answer would wake the leader
+        elif m.kind is M.APP:
             self._handle_append(m)
         elif m.kind is M.HEARTBEAT:
             self._commit_to(m.commit)

@@ -47,6 +47,8 @@ class Leader:
     _msgs: list[Message]
     _election_elapsed: int
     _heartbeat_elapsed: int
+    quiet: bool
+    _pending_conf_index: int
 
     def _become_follower(self, term: int, leader: int) -> None:
         raise NotImplementedError
@@ -82,6 +84,8 @@ class Leader:
     # -- leader (paper §5.3) -----------------------------------------------------------------
 
     def _tick_leader(self) -> None:
+        if self.quiet:
+            return  # no heartbeats, no CheckQuorum: the followers are quiet too
         self._heartbeat_elapsed += 1
         self._election_elapsed += 1
         for pr in self._progress.values():
@@ -103,11 +107,51 @@ class Leader:
                     pr.recent_active = node == self.id
         if self._heartbeat_elapsed >= self.options.heartbeat_tick:
             self._heartbeat_elapsed = 0
+            if self.options.quiesce and self._idle():
+                self._quiesce()
+                return
             self._bcast_heartbeat(self._read_only.last_context())
+
+    def _idle(self) -> bool:
+        """Whether nothing is left to do: every member holds and applied every entry
+        (as far as this leader knows, and heard from in this election interval), and
+        no read or membership change waits."""
+        log_ = self.log
+        return (
+            log_.committed == log_.last_index
+            and log_.applied >= log_.committed
+            and self._pending_conf_index <= log_.committed
+            and not self._read_only.last_context()
+            and not self._early_reads
+            and all(
+                pr.match == log_.last_index and pr.recent_active for pr in self._progress.values()
+            )
+        )
+
+    def _quiesce(self) -> None:
+        """Tell every member to go quiet, and stop heartbeats."""
+        for node in sorted(self._progress):
+            if node != self.id:
+                commit = min(self._progress[node].match, self.log.committed)
+                self._send(M.QUIESCE, node, commit=commit)
+        self.quiet = True
+
+    def _wake(self) -> None:
+        """Leave quiet (a proposal, a read, a message): heartbeats resume at the next
+        tick, and CheckQuorum counts every member as heard from until then (they were
+        silent because we asked them to be)."""
+        if not self.quiet:
+            return
+        self.quiet = False
+        self._election_elapsed = 0
+        self._heartbeat_elapsed = self.options.heartbeat_tick
+        for pr in self._progress.values():
+            pr.recent_active = True
 
     def _propose(self, kind: EntryKind, data: bytes) -> tuple[int, int]:
         if self.role is not Role.LEADER:
             raise NotLeader(self.leader)
+        self._wake()
         entry = Entry(self.term, self.log.last_index + 1, kind, data)
         self._append([entry])
         return entry.index, entry.term

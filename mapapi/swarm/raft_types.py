@@ -25,6 +25,7 @@ class RaftOptions:
     max_inflight: int = 64  # appends in flight per follower (pipelining, thesis §10.2.2)
     max_entries_per_msg: int = 256  # batching
     max_bytes_per_msg: int = 1 << 20
+    quiesce: bool = False  # an idle group goes quiet (needs the driver's `leader_alive`)
 
 
 class RaftError(Exception):
@@ -193,6 +194,7 @@ class MessageKind(enum.Enum):
     SNAP = 9
     READ_INDEX = 10
     READ_INDEX_RESP = 11
+    QUIESCE = 12  # a heartbeat that also tells the follower to stop its election timer
 
 
 @dataclass(frozen=True, slots=True)

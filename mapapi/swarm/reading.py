@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from mapapi.core.errors import ChunkNotFound
 from mapapi.store.labels import LabelledStore, summarise
+from mapapi.store.offload import off_loop
 
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
@@ -40,12 +41,12 @@ async def read(
 async def scan(
     store: ReplicaStore, swarm: Swarm | None, time: int, table: str, chunk: ChunkId | None
 ) -> list[Revision]:
-    """Items visible at `time` in a table or chunk; a chunk not held here is
-    fetched first."""
+    """Items visible at `time` in a table or chunk (read in a worker thread); a
+    chunk not held here is fetched first."""
     if swarm is not None:
         for each in await _scope_chunks(store, swarm, table, chunk):
             await swarm.reads.read_at(each, time)
-    return store.scan(time, table=table, chunk=chunk)
+    return await off_loop(store, store.scan, time, table=table, chunk=chunk)
 
 
 async def latest(
@@ -72,6 +73,11 @@ async def latest(
         chunks = [] if held is None else [held]
     else:
         chunks = await _scope_chunks(store, swarm, table, chunk)
+    return await _caught_up(swarm, chunks, time)
+
+
+async def _caught_up(swarm: Swarm, chunks: Sequence[ChunkId], time: int) -> int:
+    """`time`, or the newest clock of `chunks` once caught up with their leaders."""
     for each in chunks:
         time = max(time, await swarm.reads.caught_up(each))
     return time
@@ -98,8 +104,8 @@ async def _scope_chunks(
     """The chunks a scan of `table` (or of its `chunk`) reads; a chunk not held
     here is fetched first."""
     if chunk is None:
-        return [c.id for c in store.chunks(table)]
-    if chunk not in {c.id for c in store.chunks()}:
+        return store.chunk_ids(table)
+    if chunk not in store.chunk_ids():
         await swarm.replicator.participate(chunk)
     return [chunk]
 
@@ -110,15 +116,57 @@ async def scan_labelled(
     """The items of `table` labelled `label` visible at `time`: from the store's
     label index when it keeps one for `labels`, else filtered from the table's
     rows. In a swarm, the label's chunks are made final up to `time` first (as
-    `scan`)."""
+    `scan`); the rows are read in a worker thread (`off_loop`)."""
+    if swarm is not None:
+        for chunk in _label_chunks(store, labels, [label], (table,)):
+            await swarm.reads.read_at(chunk, time)
+    return await off_loop(store, scan_labelled_now, store, labels, time, label, table)
+
+
+async def labelled_readable(
+    store: ReplicaStore,
+    swarm: Swarm | None,
+    labels: Labels,
+    names: Sequence[str],
+    tables: Sequence[str],
+    time: int,
+) -> int:
+    """A time at or after `time` at which the rows of `tables` labelled with any
+    of `names` read the same from now on, on every replica: their chunks are
+    caught up with their leaders (the time moves to the newest of their clocks,
+    as a fresh view's does: `latest`) and made final up to it. Then
+    `scan_labelled_now` reads them at that time from any thread. Alone, `time`."""
+    if swarm is None:
+        return time
+    chunks = _label_chunks(store, labels, names, tables)
+    time = await _caught_up(swarm, chunks, time)
+    for chunk in chunks:
+        await swarm.reads.read_at(chunk, time)
+    return time
+
+
+def _label_chunks(
+    store: ReplicaStore, labels: Labels, names: Sequence[str], tables: Sequence[str]
+) -> list[ChunkId]:
+    """The chunks of `tables` holding rows labelled with one of `names` (every
+    chunk of those tables when the store keeps no index of `labels`)."""
+    if not _indexed(store, labels):
+        return [c for table in tables for c in store.chunk_ids(table)]
+    assert isinstance(store, LabelledStore)
+    found = (store.label_chunks(name, table) for name in names for table in tables)
+    return list(dict.fromkeys(c for chunks in found for c in chunks))
+
+
+def scan_labelled_now(
+    store: ReplicaStore, labels: Labels, time: int, label: str, table: str
+) -> list[Revision]:
+    """`scan_labelled` without making chunks final: after `labelled_readable`, in
+    any thread (it touches only the store)."""
     if not _indexed(store, labels):
         fn = labels.of(store.tables().get(table, ""))
-        rows = await scan(store, swarm, time, table, None)
+        rows = store.scan(time, table=table)
         return [r for r in rows if fn is not None and _label(fn, r.data) == label]
     assert isinstance(store, LabelledStore)
-    if swarm is not None:
-        for chunk in store.label_chunks(label, table):
-            await swarm.reads.read_at(chunk, time)
     return store.scan_labelled(time, label, table=table)
 
 

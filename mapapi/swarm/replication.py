@@ -208,9 +208,9 @@ class Replicator:
         """The chunks this peer holds with others (a restarted peer's groups resume
         by themselves; their chains are compared at once)."""
         return [
-            c.id
-            for c in self.store.chunks()
-            if self.holds(c.id) and [p for p in self.store.holders(c.id) if p != self.me]
+            c
+            for c in self.store.chunk_ids()
+            if self.holds(c) and [p for p in self.store.holders(c) if p != self.me]
         ]
 
     # -- finding holders -------------------------------------------------------------------
@@ -293,7 +293,7 @@ class Replicator:
         """Use `chord` as the lookup index: announce every chunk this peer holds and
         refresh every announcement in the background."""
         self.chord = chord
-        self.announced.start(chord, [c.id for c in self.store.chunks()])
+        self.announced.start(chord, self.store.chunk_ids())
 
     def _holder_entries(self, chunk: ChunkId) -> list[Entry]:
         return [(chunk_key(chunk), encode_holder(self.members.me))]

@@ -46,6 +46,7 @@ from mapapi.lookup.spatial_index import (
     encode_filter,
 )
 from mapapi.net.messages import Ack, TableInfo, TriggerPush
+from mapapi.store.offload import off_loop
 from mapapi.swarm.triggers import CommitEvent, commit_event
 
 if TYPE_CHECKING:
@@ -219,6 +220,7 @@ class Subscriptions:
         self.mine: dict[bytes, Subscription] = {}
         self.announced: Announcements[bytes] = Announcements(self._entries, ttl, "subscription")
         self.pushes = 0  # pushes tried, to others and to itself (for tests and benchmarks)
+        self._descriptors: dict[str, TableDescriptor] = {}
         rpc.register(TriggerPush, self.rpc_trigger_push)
 
     def start(self, chord: ChordNode, grid: SpatialGrid) -> None:
@@ -290,10 +292,10 @@ class Subscriptions:
         subscriber that does not answer (logged)."""
         if self.index is None:
             return 0
-        placed = self._placed(record, revisions)
-        if not placed:
+        # decoding every revision of a large commit takes seconds: not on the loop
+        placed, around = await off_loop(self.store, self._placed, record, revisions)
+        if around is None:
             return 0
-        around = BBox.enclosing(box for _, _, box in placed)
         try:
             members = await self.index.members(around, REGION_FILTER, encode_filter(around))
         except MapError as exc:
@@ -303,11 +305,7 @@ class Subscriptions:
         for sub_id, message in {m.id: m for m in _decoded(members)}.items():
             try:  # a malformed subscription (anyone may store one) must not fail a commit
                 spec = SubscriptionSpec.from_pb(message)
-                matched = tuple(
-                    r
-                    for r, before, _ in placed
-                    if spec.matches(self._descriptor(r.table), r, before)
-                )
+                matched = await off_loop(self.store, self._matching, spec, placed)
             except (MapError, ValueError) as exc:
                 log.warning("skipping subscription %s: %s", sub_id.hex()[:8], exc)
                 continue
@@ -318,9 +316,10 @@ class Subscriptions:
 
     def _placed(
         self, record: CommitRecord, revisions: Sequence[Revision]
-    ) -> list[tuple[Revision, Revision | None, BBox]]:
+    ) -> tuple[list[tuple[Revision, Revision | None, BBox]], BBox | None]:
         """The revisions whose item has a box before or after the commit, with the
-        previous revision and the box around both."""
+        previous revision and the box around both; and the box around them all
+        (None: none has a box). Any thread."""
         found = []
         for revision in revisions:
             descriptor = self._descriptor(revision.table)
@@ -336,10 +335,20 @@ class Subscriptions:
             ]
             if boxes:
                 found.append((revision, before, BBox.enclosing(boxes)))
-        return found
+        return found, BBox.enclosing(box for _, _, box in found) if found else None
+
+    def _matching(
+        self, spec: SubscriptionSpec, placed: list[tuple[Revision, Revision | None, BBox]]
+    ) -> tuple[Revision, ...]:
+        """The revisions of `placed` that `spec` matches (any thread)."""
+        return tuple(
+            r for r, before, _ in placed if spec.matches(self._descriptor(r.table), r, before)
+        )
 
     def _descriptor(self, table: str) -> TableDescriptor:
-        return TableDescriptor.named(table, self.store.tables()[table])
+        if table not in self._descriptors:  # a table's type never changes: read it once
+            self._descriptors[table] = TableDescriptor.named(table, self.store.tables()[table])
+        return self._descriptors[table]
 
     async def _push(
         self,

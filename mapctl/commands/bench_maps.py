@@ -212,7 +212,7 @@ def bench_scale(
     from mapctl import render
 
     result = measure_scale(
-        parse_counts(counts), graph or DEFAULT_GRAPH, runs=runs, directory=directory
+        parse_counts(counts), graph or DEFAULT_GRAPH, runs=runs, directory=directory, label=label
     )
     if as_json:
         render.emit_json(result)

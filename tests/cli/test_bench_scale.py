@@ -32,11 +32,12 @@ def _small_graph(path: Path, poses: int = 40) -> Path:
 def test_the_command_grows_the_repository_and_prints_one_json_object(tmp_path: Path) -> None:
     graph = _small_graph(tmp_path / "spiral.g2o")
     args = ["bench", "scale", "--missions", "2,1", "--graph", str(graph), "--runs", "1"]
-    result = CliRunner().invoke(cli, [*args, "--dir", str(tmp_path), "--json"])
+    result = CliRunner().invoke(cli, [*args, "--label", "now", "--dir", str(tmp_path), "--json"])
 
     assert result.exit_code == 0, result.output
     figures = json.loads(result.stdout)
     assert (figures["graph"], figures["vertices"], figures["edges"]) == ("spiral.g2o", 40, 40)
+    assert figures["label"] == "now"
     assert [p["missions"] for p in figures["points"]] == [1, 2]
     for point in figures["points"]:
         assert set(point["seconds"]) == set(READS)

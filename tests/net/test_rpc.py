@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
+import warnings
 
 import pytest
 
@@ -15,7 +17,10 @@ from mapapi.core.errors import (
     ProtocolError,
     RequestTimeout,
 )
+from mapapi.core.ids import PeerId
 from mapapi.net import Ping, Pong, Request, Rpc
+from mapapi.net.codec import Envelope, Kind
+from mapapi.net.inbound import Inbound, Route
 from mapapi.net.rpc import DEFAULT_TIMEOUT
 
 from .conftest import MakeRpc
@@ -194,6 +199,29 @@ class TestShutdown:
         await server.close()
         assert server.running_handlers == 0
         assert asyncio.all_tasks() == {asyncio.current_task()}
+
+    async def test_a_request_that_arrives_as_it_closes_leaves_no_coroutine_unawaited(
+        self, make_rpc: MakeRpc
+    ) -> None:
+        """The reader hands over a request and close() runs in the same loop turn:
+        the handler's task is cancelled before its first step, and its coroutine
+        must be closed with it, not dropped ("coroutine ... was never awaited")."""
+        server = await make_rpc()
+        served: list[Request] = []
+
+        async def handler(req: Request) -> Pong:
+            served.append(req)
+            return Pong()
+
+        server.register(Ping, handler)
+        late = Envelope(1, PeerId.new(), 1, Kind.REQUEST, Ping(b"late"))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            server.on_message(Inbound(late, Route(b"late", "late"), None, 0))  # as a reader does
+            await server.close()
+            gc.collect()
+        assert served == []
+        assert [str(w.message) for w in caught if "never awaited" in str(w.message)] == []
 
     async def test_requests_after_close_fail_fast(self, pair: tuple[Rpc, Rpc]) -> None:
         client, server = pair

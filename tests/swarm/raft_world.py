@@ -58,6 +58,7 @@ class Node:
             states=self.states(),
             compact_after=world.compact_after,
             on_members=self.holders.__setitem__,
+            alive=world.alive,
         )
 
     def states(self) -> StoreStates | None:
@@ -95,6 +96,7 @@ class World:
         self.addresses: dict[PeerId, str] = {}
         self.nodes: list[Node] = []
         self.compact_after = COMPACT_AFTER  # for the nodes added from now on
+        self.alive: Callable[[PeerId], bool] | None = None  # a failure detector: groups go quiet
 
     async def add(self, peer: PeerId | None = None, kind: type[Node] | None = None) -> Node:
         peer = peer or PeerId.new()

@@ -9,8 +9,10 @@ round count, and compare it with the `SortedRing` oracle.
 from __future__ import annotations
 
 import asyncio
+import gc
 import math
 import random
+import warnings
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
 
@@ -321,6 +323,21 @@ class TestValues:
             wanted = {b"late"} if isinstance(body, ChordAdd) else set()
             assert joiner.storage.get(key, joiner.clock()) == wanted
             assert await sender.get(key) == wanted
+
+    async def test_an_update_copied_to_a_predecessor_that_is_also_successor_goes_once(
+        self, make_ring: MakeRing
+    ) -> None:
+        """In a ring of two, a node's predecessor is its successor too: an update of
+        the predecessor's key sent here (through routes older than a join) is copied
+        to it once, and no copy is built and left unsent ("never awaited")."""
+        first, second = await make_ring(2)
+        key = second.key  # owned by `second`, the predecessor of `first`
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            await second.rpc.request(first.me.address, ChordAdd(key_bytes(key), b"m", 600))
+            gc.collect()
+        assert [str(w.message) for w in caught if "never awaited" in str(w.message)] == []
+        assert second.storage.get(key, second.clock()) == {b"m"}
 
     async def test_a_member_not_refreshed_expires(self, make_ring: MakeRing) -> None:
         now = [1000.0]

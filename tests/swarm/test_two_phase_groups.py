@@ -73,6 +73,12 @@ async def transfer(node: Writer) -> CommitRecord:
     return record
 
 
+def has_decided(node: Writer, cid: CommitId) -> bool:
+    """Whether this replica applied a decision of the transaction on both chunks."""
+    rows = [node.store.raft_tx(c, cid) for c in (A, B)]
+    return all(r is not None and r.state != "prepared" for r in rows)
+
+
 def settled(nodes: list[Writer]) -> bool:
     return all(not n.store.raft_tx_prepared(c) for n in nodes for c in (A, B))
 
@@ -150,8 +156,10 @@ async def test_prepares_left_by_a_vanished_coordinator_are_aborted(world: World)
     recoveries = await recovering(nodes)
     try:
         for node in nodes:
-            await node.wait(lambda n=node: settled([n]))
-            assert {n.store.raft_tx(c, cid).state for n in [node] for c in (A, B)} == {"aborted"}  # type: ignore[union-attr]
+            await node.wait(
+                lambda n=node: has_decided(n, cid)
+            )  # its prepares applied, then settled
+            assert {node.store.raft_tx(c, cid).state for c in (A, B)} == {"aborted"}  # type: ignore[union-attr]
             assert balances(node) == (START, START)
         await transfer(nodes[0])  # the chunks take commits again
     finally:
@@ -172,7 +180,7 @@ async def test_a_commit_decided_on_the_first_chunk_is_carried_to_the_others(
     recoveries = await recovering(nodes)
     try:
         for node in nodes:
-            await node.wait(lambda n=node: settled([n]))
+            await node.wait(lambda n=node: has_decided(n, cid))
             assert balances(node) == (0, 200)
             assert node.store.raft_tx(B, cid).state == "committed"  # type: ignore[union-attr]
     finally:

@@ -537,3 +537,53 @@ class TestReadIndex:
         with pytest.raises(NotLeader) as err:
             net.nodes[2].read_index(b"x")
         assert err.value.leader == NONE
+
+
+class TestQuiescence:
+    """An idle group goes quiet: no heartbeats, no election timers (RaftOptions.quiesce)."""
+
+    @staticmethod
+    def quiet_group() -> Network:
+        net = Network(options=RaftOptions(election_tick=ELECTION, quiesce=True))
+        net.elect(1)
+        net.propose(1, b"a")
+        net.tick_all((1, 2, 3), 3)  # a heartbeat round hears everyone, the next one quiesces
+        assert all(n.quiet for n in net.nodes.values())
+        return net
+
+    def test_an_idle_group_sends_nothing_and_a_proposal_wakes_it(self) -> None:
+        net = self.quiet_group()
+        sent = len(net.sent)
+        net.tick_all((1, 2, 3), 5 * ELECTION)  # long past any election timeout
+        assert len(net.sent) == sent
+        assert net.nodes[1].role is Role.LEADER
+        net.propose(1, b"b")
+        assert net.data(1) == net.data(2) == net.data(3) == [b"a", b"b"]
+        assert not net.nodes[1].quiet
+
+    def test_followers_whose_leader_died_elect_another(self) -> None:
+        net = self.quiet_group()
+        net.isolate(1)
+        for _ in range(3 * ELECTION):  # the failure detector no longer hears node 1
+            for nid in (2, 3):
+                net.nodes[nid].tick(leader_alive=False)
+            net.flush()
+        assert {net.nodes[n].role for n in (2, 3)} == {Role.LEADER, Role.FOLLOWER}
+        leader = next(n for n in (2, 3) if net.nodes[n].role is Role.LEADER)
+        net.propose(leader, b"after")
+        assert net.data(2)[-1] == net.data(3)[-1] == b"after"
+
+    def test_a_follower_that_missed_the_quiesce_wakes_the_leader(self) -> None:
+        net = Network(options=RaftOptions(election_tick=ELECTION, quiesce=True))
+        net.elect(1)
+        net.propose(1, b"a")
+        net.drop = lambda m: m.kind is M.QUIESCE and m.to == 3
+        net.tick_all((1, 2, 3), 3)
+        assert net.nodes[1].quiet
+        assert not net.nodes[3].quiet  # its timer runs: it will ask for votes
+        net.drop = lambda m: False
+        term = net.nodes[1].term
+        net.tick_all((1, 2, 3), 4 * ELECTION)
+        assert net.nodes[1].role is Role.LEADER  # woken by the pre-vote, it kept its group
+        assert net.nodes[1].term == term
+        assert all(n.quiet for n in net.nodes.values())  # and quiesced again

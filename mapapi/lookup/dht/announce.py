@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Awaitable, Callable, Hashable, Sequence
 from typing import TYPE_CHECKING, Generic, TypeVar
 
 from mapapi.core import limits
@@ -41,8 +41,8 @@ class Announcements(Generic[K]):
             each announcement, so they follow changes).
         ttl: seconds an entry lives unless refreshed.
         what: a word for log lines ("holder", "box").
-        before_refresh: called before each periodic refresh (to recompute what
-            is cheap to keep approximate between refreshes).
+        before_refresh: awaited before each periodic refresh (to recompute what
+            is cheap to keep approximate between refreshes, off the event loop).
     """
 
     def __init__(
@@ -51,7 +51,7 @@ class Announcements(Generic[K]):
         ttl: float,
         what: str,
         *,
-        before_refresh: Callable[[], None] | None = None,
+        before_refresh: Callable[[], Awaitable[None]] | None = None,
     ) -> None:
         limits.ttl(ttl)
         self.ttl = ttl
@@ -97,7 +97,7 @@ class Announcements(Generic[K]):
     async def refresh(self) -> None:
         """Announce every registered thing again: its time-to-live restarts."""
         if self._before_refresh is not None:
-            self._before_refresh()
+            await self._before_refresh()
         for thing in list(self._sent):
             await self._announce(thing, renew=True)
 

@@ -106,11 +106,12 @@ class RingValues:
         return pred is None or ring.responsible(key, self._node.key, pred.key)
 
     async def _replicate(self, body: object, targets: list[Node] | None = None) -> None:
-        nodes = self._node.successors if targets is None else targets
-        # once each: a successor list may name a node twice (a small or repairing ring),
-        # and a second call under the same key would be dropped unawaited
-        unique = dict.fromkeys(s for s in nodes if s != self._node.me)
-        answers = await ask_all({s: self._node.call(s, body, Ack) for s in unique})
+        """Copy `body` to each of `targets` (the successors by default) but this node,
+        once each: in a ring of at most k + 1 nodes the predecessor is a successor
+        too, and a repeated key in the dict below would drop a call unawaited."""
+        wanted = self._node.successors if targets is None else targets
+        once = [s for s in dict.fromkeys(wanted) if s != self._node.me]
+        answers = await ask_all({s: self._node.call(s, body, Ack) for s in once})
         for node, error in answers.failed.items():
             log.debug("replica %s missed an update: %s", node.address, error)
 

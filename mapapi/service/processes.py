@@ -1,0 +1,85 @@
+"""Work that holds the interpreter for long, in a process of its own (issue 14 §1).
+
+A worker thread keeps the event loop free only while the thread waits (on
+SQLite, on the disk) or runs Python bytecode, which hands the interpreter lock
+over every few milliseconds. Drawing a picture runs long stretches of C (Agg)
+without letting go, so a picture drawn in a thread still stalls heartbeats for
+hundreds of milliseconds. `in_process` runs such work in a new process instead.
+
+The process is started with "spawn": a daemon has threads and sockets that a
+fork would copy in whatever state they were. Starting it costs about a second
+(a fresh interpreter imports what the work needs), so this is for work that
+takes seconds. Arguments and the result travel pickled: give arrays and small
+values, not graphs of many small objects, whose pickling holds the lock too.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import multiprocessing
+import os
+from collections.abc import Callable
+from functools import partial
+from multiprocessing.connection import Connection
+from typing import ParamSpec, TypeVar, cast
+
+from mapapi.core.errors import MapError
+
+P = ParamSpec("P")
+T = TypeVar("T")
+
+NICENESS = 10
+"""How much nicer (lower in the OS scheduler's priority) a job's process runs."""
+
+
+async def in_process(fn: Callable[P, T], *args: P.args, **kwargs: P.kwargs) -> T:
+    """`fn(*args, **kwargs)` in a new process (see the module docstring); its
+    result, or what it raised. `fn` must be importable by name (a module's
+    function), and its arguments and result picklable. The process is started
+    and waited for from a worker thread (starting one forks and waits), and
+    does one job: it exits once it answered, even if this process died meanwhile.
+
+    Raises:
+        MapError: the process died before it answered.
+    """
+    return await asyncio.to_thread(_run_in_child, partial(fn, *args, **kwargs))
+
+
+def _run_in_child(call: Callable[[], T]) -> T:
+    spawn = multiprocessing.get_context("spawn")
+    receive, send = spawn.Pipe(duplex=False)
+    child = spawn.Process(target=_serve, args=(call, send), name="mapapi-job", daemon=True)
+    child.start()
+    send.close()  # the child's end: the pipe ends (EOF) if the child dies
+    try:
+        ok, value = receive.recv()
+    except EOFError:
+        child.join()
+        raise MapError(
+            f"the job's process died (exit {child.exitcode}); see the peer's log"
+        ) from None
+    finally:
+        receive.close()
+    child.join()
+    if ok:
+        return cast(T, value)
+    raise value
+
+
+def _serve(call: Callable[[], object], send: Connection) -> None:
+    """What the child runs: the call, then its result or error down the pipe. It
+    runs `NICENESS` steps nicer than the daemon, so on a busy machine the daemon's
+    loop gets a core first (a job only takes longer)."""
+    with contextlib.suppress(OSError):
+        os.nice(NICENESS)
+    try:
+        answer: tuple[bool, object] = (True, call())
+    except Exception as exc:  # sent to the parent, which raises it
+        answer = (False, exc)
+    try:
+        send.send(answer)
+    except Exception as exc:  # an answer that does not pickle
+        send.send((False, MapError(f"the job's answer could not be sent back: {exc!r}")))
+    finally:
+        send.close()
