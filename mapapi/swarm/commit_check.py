@@ -27,6 +27,21 @@ from mapapi.core.table import TableDescriptor
 from mapapi.store.base import ReplicaStore, Store
 
 
+def checked_entry(
+    store: ReplicaStore, chunk: ChunkId, data: bytes, sender: PeerId, members: Collection[PeerId]
+) -> LogEntry:
+    """A writer's entry to `chunk`'s log, parsed and checked (`check_proposal`)
+    before its leader proposes it; any thread (a big one is parsed in a worker).
+
+    Raises:
+        CorruptRepoError: the entry does not parse (it would not apply).
+        NotParticipatingError, UsageError, LimitExceeded: see `check_proposal`.
+    """
+    entry = codec.decode_entry(data)
+    check_proposal(store, chunk, entry, sender, members)
+    return entry
+
+
 def check_proposal(
     store: ReplicaStore,
     chunk: ChunkId,

@@ -234,7 +234,13 @@ class GroupMembers:
             wanted = {node_id(p) for p in living}
             me = node_id(self.groups.me)
             ready = self.groups.promotable(chunk)
-            if next_change(self.groups.config(chunk), wanted, self.factor, me, ready) is None:
+            config = self.groups.config(chunk)
+            if len(config.voters - {node_id(p) for p in dead}) <= len(config.voters) // 2:
+                # no majority would commit the change: proposing it would only
+                # shrink this leader's view of the configuration (a change takes
+                # effect once appended), and what a minority's errors name
+                continue
+            if next_change(config, wanted, self.factor, me, ready) is None:
                 continue  # nothing to do, or only a learner to promote that lags
             try:
                 async with self._changing.setdefault(chunk, asyncio.Lock()):

@@ -15,9 +15,8 @@ from typing import TYPE_CHECKING
 from mapapi.core.errors import CorruptRepoError, ProposalLost, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
-from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.raft import RaftNode
-from mapapi.swarm.raft_types import NONE, Entry, EntryKind, Ready, Role
+from mapapi.swarm.raft_types import NONE, Entry, Ready, Role
 from mapapi.swarm.raft_wire import from_wire, node_id, rows
 
 if TYPE_CHECKING:
@@ -38,7 +37,7 @@ class Applied:
 ApplyFn = Callable[[ChunkId, Entry], Applied]
 """Applies one committed NORMAL entry of a chunk's log to the store (called inside
 `store.exclusive()`, with the applied index and time recorded in the same
-transaction)."""
+transaction; from any thread: `swarm/group_apply.py`)."""
 AddressFn = Callable[[PeerId], str]
 """Where a peer is reached now (the member list); raises `PeerUnavailable`."""
 
@@ -123,11 +122,10 @@ def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:
     )
 
 
-def compact(store: ReplicaStore, group: GroupState, data: bytes) -> None:
-    """Compact the group's log up to its applied index into a snapshot of `data` (the
+def compact(store: ReplicaStore, group: GroupState, data: bytes, index: int) -> None:
+    """Compact the group's log up to `index` (applied) into a snapshot of `data` (the
     chunk's state there), persisted with the entries after it."""
-    node = group.node
-    snap = node.compact(node.log.applied, data)
+    snap = group.node.compact(index, data)
     kept = store.raft_load(group.chunk)
     after = [] if kept is None else [e for e in kept.entries if e.index > snap.index]
     store.raft_save(
@@ -135,34 +133,6 @@ def compact(store: ReplicaStore, group: GroupState, data: bytes) -> None:
         snapshot=(snap.index, snap.term, snap.config.encode(), snap.data),
         entries=after,
     )
-
-
-def install(states: StoreStates | None, group: GroupState, data: bytes, index: int) -> None:
-    """Make this replica a leader's snapshot of the chunk (the log jumped past us)."""
-    if states is None:
-        log.error("chunk %s: a snapshot arrived, and this peer cannot install one", group.chunk)
-        return
-    states.install(group.chunk, data, index)
-    group.progress.set()
-
-
-def apply_committed(
-    store: ReplicaStore, group: GroupState, entries: tuple[Entry, ...], apply: ApplyFn
-) -> None:
-    """Apply committed entries in one store transaction, each NORMAL one with its
-    applied index and the chunk's clock after it (so the next proposal of the
-    same batch is stamped past it), then answer their proposers."""
-    if not entries:
-        return
-    group.progress.set()
-    results: dict[int, Applied] = {}
-    with store.exclusive():
-        for entry in entries:
-            if entry.kind is EntryKind.NORMAL:
-                results[entry.index] = applied = apply(group.chunk, entry)
-                store.raft_applied(group.chunk, entry.index, applied.time)
-        store.raft_applied(group.chunk, entries[-1].index)
-    group.settle(entries, results)
 
 
 def step_batch(

@@ -1,17 +1,17 @@
 """The multi-Raft shell: one Raft group per chunk this peer holds (DESIGN §13).
 
 `RaftGroups` drives a pure `RaftNode` (`swarm/raft.py`) per chunk through the
-Ready loop: it persists each `Ready` in the store (`Store.raft_save`) before
-sending its messages, applies committed entries through the `apply` hook in the
-same store transaction that records the applied index (so an entry's effect
-lands once, even across a crash), and resolves the futures of proposals once
-their entry applies. One ticker drives every group; all messages for one peer
-leave in one `RaftBatch` notification per round (`swarm/raft_mail.py`), so the
-heartbeats of many shared groups cost one frame per pair of peers. With a
-`StoreStates`, logs are compacted into snapshots of the chunk's state, which a
-member that joins or lags far behind installs (`swarm/chunk_state.py`). A peer's
-node id is the top 63 bits of its `PeerId` (`node_id`), the same in every group,
-so configurations in the logs name peers, never addresses.
+Ready loop: it persists each `Ready` (`Store.raft_save`) before sending its
+messages, and hands committed entries to `GroupApplier` (`swarm/group_apply.py`),
+which applies them with the applied index in one store transaction (an entry
+lands once, even across a crash), big ones in a worker thread, and answers their
+proposers. One ticker drives every group; all messages for one peer leave in one
+`RaftBatch` per round (`swarm/raft_mail.py`), so many shared groups' heartbeats
+cost one frame per pair of peers. With a `StoreStates`, logs are compacted into
+snapshots of the chunk's state, which a member that joins or lags far behind
+installs (`swarm/chunk_state.py`). A peer's node id is the top 63 bits of its
+`PeerId` (`node_id`), the same in every group: configurations name peers, never
+addresses.
 """
 
 from __future__ import annotations
@@ -30,15 +30,14 @@ from mapapi.net.messages import Ack, RaftBatch
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.chunk_state import StoreStates
+from mapapi.swarm.group_apply import AppliedHook, GroupApplier
 from mapapi.swarm.group_state import (
     AddressFn,
     Applied,
     ApplyFn,
     GroupState,
-    apply_committed,
     compact,
     halted,
-    install,
     not_committed,
     persist,
     step_batch,
@@ -74,7 +73,8 @@ class RaftGroups:
         store: where each group's state and log persist.
         rpc: sends and receives `RaftBatch` notifications (registered here).
         address: where a peer is reached now.
-        apply: applies a committed entry's effect to the store.
+        apply: applies a committed entry's effect to the store (any thread);
+            `on_applied` is told on the loop what it did.
         peers: every peer a node id may stand for (the member list), to map ids back.
         options: the core's tunables; `seed` makes election timeouts reproducible.
         on_change: called after each Ready round that changed a role, a leader or sent.
@@ -100,6 +100,7 @@ class RaftGroups:
         compact_after: int = COMPACT_AFTER,
         on_members: Callable[[ChunkId, list[PeerId]], None] | None = None,
         alive: Callable[[PeerId], bool] | None = None,
+        on_applied: AppliedHook | None = None,
     ) -> None:
         self.me = me
         self._alive = alive
@@ -109,7 +110,7 @@ class RaftGroups:
         self.store = store
         self.rpc = rpc
         self.mail = RaftMail(rpc, address, peers)
-        self._apply = apply
+        self.applier = GroupApplier(store, states, apply, on_applied, self._halt)
         self._options = replace(options or RaftOptions(), quiesce=alive is not None)
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
@@ -118,7 +119,6 @@ class RaftGroups:
         self._ticker: asyncio.Task[None] | None = None
         rpc.register(RaftBatch, self.rpc_raft_batch)
 
-    # -- lifecycle ---------------------------------------------------------------------
     def start(self, tick: float = TICK_SECONDS) -> None:
         """Start ticking every group (on the running loop)."""
         self._ticker = asyncio.get_running_loop().create_task(self._tick_forever(tick))
@@ -129,6 +129,7 @@ class RaftGroups:
             self._ticker.cancel()
             await asyncio.gather(self._ticker, return_exceptions=True)
             self._ticker = None
+        await self.applier.close()
         for group in self._groups.values():
             group.fail_all(PeerUnavailable("this peer is closing"))
 
@@ -142,10 +143,9 @@ class RaftGroups:
         if chunk in self._groups or self.store.raft_load(chunk) is not None:
             raise ValueError(f"chunk {chunk} already has a Raft group here")
         config = Config(frozenset(node_id(p) for p in voters))
-        self._open(chunk, PersistentState.bootstrap(config), applied=1)
-        self.store.raft_save(
-            chunk, hard=(1, NONE, 1), entries=rows(PersistentState.bootstrap(config).entries)
-        )
+        boot = PersistentState.bootstrap(config)
+        self._open(chunk, boot, applied=1)
+        self.store.raft_save(chunk, hard=(1, NONE, 1), entries=rows(boot.entries))
         # The chunk's clock starts at its newest commit (a history from before the group).
         self.store.raft_applied(
             chunk, 1, max((c.time for c in self.store.chunk_commits(chunk)), default=0)
@@ -153,7 +153,7 @@ class RaftGroups:
         if self.states is not None and self.states.knows(chunk):
             # The log starts from a snapshot of the chunk (its table, and any history
             # from before the group), which every member that joins receives.
-            compact(self.store, self._groups[chunk], self.states.take(chunk))
+            compact(self.store, self._groups[chunk], self.states.take(chunk), 1)
         if config.voters == {node_id(self.me)}:
             self._groups[chunk].node.campaign()
             self._process(self._groups[chunk])
@@ -184,7 +184,6 @@ class RaftGroups:
         )
         self._groups[chunk] = GroupState(chunk, node)
 
-    # -- reading the groups ------------------------------------------------------------
     def leader(self, chunk: ChunkId) -> PeerId | None:
         """The chunk's leader as this peer knows it, or None during an election."""
         group = self._groups.get(chunk)
@@ -200,8 +199,7 @@ class RaftGroups:
         return [c for c, g in self._groups.items() if g.role is Role.LEADER]
 
     def members(self, chunk: ChunkId) -> list[PeerId]:
-        """The other members of the chunk's group (voters and learners) that this
-        peer can name."""
+        """The other members of the chunk's group (voters, learners) named here."""
         group = self._group(chunk)
         peers = (self._peer(n) for n in group.node.config.members if n != node_id(self.me))
         return [p for p in peers if p is not None]
@@ -215,7 +213,6 @@ class RaftGroups:
         """The last log index applied to this peer's store."""
         return 0 if (kept := self.store.raft_load(chunk)) is None else kept.applied
 
-    # -- proposing ---------------------------------------------------------------------
     async def propose(
         self,
         chunk: ChunkId,
@@ -267,6 +264,7 @@ class RaftGroups:
         """Forget the chunk's group here (this peer left it): its node, its waiters
         (they fail) and its persisted state."""
         group = self._groups.pop(chunk, None)
+        self.applier.forget(chunk)
         if group is not None:
             group.fail_all(PeerUnavailable(f"this peer left chunk {chunk.short}"))
         self.store.raft_drop(chunk)
@@ -363,8 +361,11 @@ class RaftGroups:
         try:
             self._ready_loop(group)
         except Exception as exc:
-            self._groups.pop(group.chunk, None)
-            raise halted(group, exc) from exc
+            raise self._halt(group, exc) from exc
+
+    def _halt(self, group: GroupState, error: Exception) -> CorruptRepoError:
+        self._groups.pop(group.chunk, None)  # and `halted` fails its waiters
+        return halted(group, error)
 
     def _ready_loop(self, group: GroupState) -> None:
         while group.node.has_ready():
@@ -372,9 +373,8 @@ class RaftGroups:
             persist(self.store, group.chunk, rd)
             for message in rd.messages:
                 self.mail.post(group.chunk, message)
-            if rd.snapshot is not None:
-                install(self.states, group, rd.snapshot.data, rd.snapshot.index)
-            apply_committed(self.store, group, rd.committed_entries, self._apply)
+            snap = None if rd.snapshot is None else (rd.snapshot.data, rd.snapshot.index)
+            self.applier.hand(group, rd.committed_entries, snap)
             for read in rd.read_states:
                 waiting = group.reads.get(read.context)
                 if waiting is not None and not waiting.done():
@@ -388,8 +388,8 @@ class RaftGroups:
                 group.members = group.node.config.members
                 self._on_members(group.chunk, self.mail.peers(group.members))
             done = group.node.log.applied - group.node.log.snapshot.index
-            if self.states is not None and done >= self.compact_after:
-                compact(self.store, group, self.states.take(group.chunk))
+            if done >= self.compact_after:
+                self.applier.compact(group, group.node.log.applied)
 
     def _flush(self) -> None:
         """Send what every group queued (waiters re-check if anything left)."""

@@ -43,12 +43,15 @@ from mapapi.net.rpc import Request, Rpc
 from mapapi.store.offload import off_loop
 from mapapi.swarm import faults
 from mapapi.swarm.apply import Outcome
-from mapapi.swarm.commit_check import CommitRule, check_proposal
+from mapapi.swarm.commit_check import CommitRule, checked_entry
+from mapapi.swarm.group_apply import HEAVY_BYTES
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
 from mapapi.swarm.two_phase import Answer, TwoPhase
 
 log = logging.getLogger(__name__)
 
+BIG_CHANGES = 500
+"""Changes from which a writer encodes its entry in a worker thread (`HEAVY_BYTES`)."""
 RETRY_PAUSE = 0.01
 """Seconds before a proposal is made again after "busy" or "no leader" (doubling)."""
 MAX_RETRY_PAUSE = 0.2
@@ -246,7 +249,10 @@ class LogCommits:
         entry: LogEntry,
         timeout: float,  # noqa: ASYNC109
     ) -> Outcome:
-        data = codec.encode_entry(entry)
+        if len(getattr(entry, "changes", ())) < BIG_CHANGES:
+            data = codec.encode_entry(entry)
+        else:  # a mission's rows: encoded in a worker (issue 14 §1)
+            data = await off_loop(self.groups.store, codec.encode_entry, entry)
         deadline = asyncio.get_running_loop().time() + timeout
         pause = RETRY_PAUSE
         while True:
@@ -370,9 +376,12 @@ class LogCommits:
         body: RaftPropose = req.body
         if not self.groups.is_leader(body.chunk):
             raise NotChunkLeader.of(body.chunk, self.groups.leader(body.chunk))
-        entry = codec.decode_entry(body.proposal)  # what would not apply: CorruptRepoError
         members = {self.groups.me, *self.groups.members(body.chunk)}
-        check_proposal(self.groups.store, body.chunk, entry, req.sender, members)
+        args = (self.groups.store, body.chunk, body.proposal, req.sender, members)
+        if len(body.proposal) < HEAVY_BYTES:
+            checked_entry(*args)
+        else:  # a mission's rows: decoded and checked in a worker (issue 14 §1)
+            await off_loop(self.groups.store, checked_entry, *args)
         applied = (await self.groups.propose(body.chunk, body.proposal)).result
         assert isinstance(applied, Outcome)  # the groups apply with `apply_tx.applier`
         outcome = self._raise_failure(body.chunk, applied)

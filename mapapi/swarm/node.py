@@ -47,7 +47,6 @@ from mapapi.swarm.groups import Applied, RaftGroups
 from mapapi.swarm.liveness import Liveness, LivenessOptions
 from mapapi.swarm.log_commit import LogCommits
 from mapapi.swarm.membership import Members
-from mapapi.swarm.raft_types import Entry
 from mapapi.swarm.replication import HOLDER_TTL, Replicator
 from mapapi.swarm.subscriptions import Subscriptions
 from mapapi.swarm.tx_recovery import TxRecovery
@@ -119,7 +118,8 @@ class Swarm:
             store,
             self.rpc,
             address=self.members.address,
-            apply=self._apply_entry,
+            apply=applier(store),  # from any thread: big entries apply in a worker
+            on_applied=self._applied,
             peers=lambda: [m.id for m in self.members.all()],
             states=StoreStates(store),
             on_members=store.set_holders,
@@ -143,7 +143,6 @@ class Swarm:
             self.members.address,
             remove_after=self.liveness.options.remove_after,
         )
-        self._decide = applier(store)
         self.reads = FinalReads(self.log, store)  # what views read is final
         self.replicator = Replicator(
             self.rpc,
@@ -172,16 +171,14 @@ class Swarm:
         self.members.touch(peer)
         self.liveness.heard(peer)
 
-    def _apply_entry(self, chunk: ChunkId, entry: Entry) -> Applied:
-        """Decide a committed entry of a chunk's log here (`apply_tx.applier`), and
+    def _applied(self, chunk: ChunkId, applied: Applied) -> None:
+        """A committed entry of a chunk's log was applied here (`apply_tx.applier`):
         tell the chunks' boxes and the triggers of a commit it wrote."""
-        applied = self._decide(chunk, entry)
         outcome = applied.result
         if isinstance(outcome, Outcome) and outcome.record is not None:
             self.places.applied(outcome.revisions)
             if self._on_applied is not None:
                 self._on_applied(outcome.record, outcome.revisions)
-        return applied
 
     def ensure_group(self, chunk: ChunkId) -> None:
         """Found a group of one for a chunk this peer holds alone and that has none

@@ -59,6 +59,7 @@ class Node:
             compact_after=world.compact_after,
             on_members=self.holders.__setitem__,
             alive=world.alive,
+            on_applied=lambda chunk, applied: self.changed.set(),  # on the loop
         )
 
     def states(self) -> StoreStates | None:
@@ -66,8 +67,8 @@ class Node:
         return None
 
     def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
+        """Record the entry (from a worker thread when it is big: no asyncio here)."""
         self.applied.setdefault(chunk, []).append(entry.data)
-        self.changed.set()
         return Applied()
 
     async def start(self) -> None:
@@ -141,9 +142,7 @@ class Ledger(Node):
         return StoreStates(self.store)
 
     def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
-        applied = applier(self.store)(chunk, entry)
-        self.changed.set()
-        return applied
+        return applier(self.store)(chunk, entry)
 
 
 # -- writers anywhere: a follower's transaction goes to the leader -----------------------

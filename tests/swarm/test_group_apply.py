@@ -1,0 +1,92 @@
+"""Big entries apply in a worker thread, in log order, while the loop goes on
+(`swarm/group_apply.py`; issue 14 §1): real sockets and SQLite stores, one peer
+whose apply hook holds a big entry until the test lets it go."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from pathlib import Path
+from typing import ClassVar
+
+from mapapi.core.ids import ChunkId, PeerId
+from mapapi.net.codec import Ping, Pong
+from mapapi.swarm.group_apply import HEAVY_BYTES
+from mapapi.swarm.groups import Applied
+from mapapi.swarm.raft_types import Entry
+from tests.swarm.raft_world import TIMEOUT, Node, World, leader_of
+from tests.swarm.raft_world import world as world  # the fixture
+
+BIG = b"big" + bytes(HEAVY_BYTES)
+A = ChunkId.new()
+
+
+class Gated(Node):
+    """A peer whose apply of a big entry waits for `gate`, and notes its thread."""
+
+    gate = threading.Event()
+    threads: ClassVar[list[str]] = []
+
+    def __init__(self, world: World, peer: PeerId, path: Path) -> None:
+        super().__init__(world, peer, path)
+        self.loop = asyncio.get_running_loop()
+
+    def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
+        if entry.data.startswith(b"big"):
+            Gated.threads.append(threading.current_thread().name)
+            self.loop.call_soon_threadsafe(self.changed.set)  # `wait`ers look again
+            assert Gated.gate.wait(TIMEOUT), "the test never opened the gate"
+        return super()._apply(chunk, entry)
+
+
+async def gated(world: World, n: int, chunks: list[ChunkId]) -> list[Node]:
+    """`n` gated peers founding `chunks` together, the gate closed."""
+    Gated.gate.clear()
+    Gated.threads.clear()
+    nodes = [await world.add(kind=Gated) for _ in range(n)]
+    for chunk in chunks:
+        for node in nodes:
+            node.groups.found(chunk, [m.id for m in nodes])
+    return nodes
+
+
+async def test_a_big_entry_applies_in_a_worker_while_the_peer_answers(world: World) -> None:
+    (node,) = await gated(world, 1, [A])
+    other = await world.add()
+    big = asyncio.ensure_future(node.groups.propose(A, BIG))
+    await node.wait(lambda: bool(Gated.threads))  # the big entry is being applied
+
+    # its loop still answers over the network (a write would wait for SQLite's lock)
+    pong = await other.rpc.request(world.addresses[node.id], Ping(b"up?"), expect=Pong)
+
+    assert pong.payload == b"up?"
+    assert not big.done()
+    assert Gated.threads[0] != threading.main_thread().name
+    Gated.gate.set()
+    await big
+    assert node.applied[A] == [BIG]
+
+
+async def test_entries_behind_a_big_one_apply_after_it_in_log_order(world: World) -> None:
+    nodes = await gated(world, 3, [A])
+    leader = await leader_of(nodes, A)
+    big = asyncio.ensure_future(leader.groups.propose(A, BIG))
+    await leader.wait(lambda: bool(Gated.threads))
+    small = asyncio.ensure_future(leader.groups.propose(A, b"after"))
+    # the small entry commits, and waits behind the big one: not applied, no answer
+    await leader.wait(lambda: all_committed(leader))
+    assert not small.done()
+    assert A not in leader.applied
+
+    Gated.gate.set()
+    await asyncio.gather(big, small)
+    for node in nodes:
+        await node.wait(lambda node=node: len(node.applied.get(A, [])) == 2)
+        assert node.applied[A] == [BIG, b"after"]
+        assert node.groups.applied(A) == leader.groups.applied(A)
+
+
+def all_committed(node: Node) -> bool:
+    """Whether the leader's log committed every entry it holds of chunk A."""
+    log = node.groups._group(A).node.log  # the core's indexes, as this peer knows them
+    return log.committed == log.last_index
