@@ -33,13 +33,17 @@ async def refuse_to_hand_on(store: ReplicaStore, chunk: ChunkId, me: PeerId) -> 
     Raises:
         CorruptRepoError: it does not (logged here; the newcomer asks another holder).
     """
-    commits = {c.id: c for c in store.chunk_commits(chunk)}
+    # Read in this order, the history holds at least the chained commits: commits
+    # applied meanwhile (in a worker thread, or while the chain is rebuilt) only
+    # add links past them, so the chain must be a prefix of the one rebuilt.
+    links = store.chain_links(chunk)
     revisions = store.chunk_revisions(chunk)
+    commits = {c.id: c for c in store.chunk_commits(chunk)}
     try:
         rebuilt = await asyncio.to_thread(chain.rebuild, chunk, commits, revisions)
     except KeyError:  # a revision whose commit record is gone
         rebuilt = None
-    if rebuilt == store.chain_links(chunk):
+    if rebuilt is not None and rebuilt[: len(links)] == links:
         return
     problem = (
         f"chunk {chunk.short}: the history of this replica no longer matches its hash "

@@ -7,7 +7,10 @@ peer daemon through the environment, `MAPAPI_FAULTS="commit.staged=pause"`
 
 - ``pause``: log ``fault point NAME reached`` and wait for ever, so that a test
   can `kill -9` the process at exactly that moment of a commit;
-- ``crash``: kill the process with SIGKILL on the spot.
+- ``crash``: kill the process with SIGKILL on the spot;
+- ``block:SECONDS``: block the daemon's event loop for SECONDS (a `time.sleep`
+  on the loop, as a slow command once did), then go on: nothing is sent,
+  received or ticked meanwhile, and the other peers carry on without it.
 
 The points, both on the writer's side of a commit through the chunks' logs
 (`swarm/log_commit.py`): ``commit.acknowledged`` (the chunk's log took the
@@ -24,6 +27,7 @@ import functools
 import logging
 import os
 import signal
+import time
 from collections.abc import Awaitable, Callable, Mapping
 
 from mapapi.core.errors import UsageError
@@ -73,6 +77,12 @@ async def _crash(point: str) -> None:
     os.kill(os.getpid(), signal.SIGKILL)
 
 
+async def _block(point: str, seconds: float) -> None:
+    log.warning("fault point %s reached; blocking the event loop for %g s", point, seconds)
+    time.sleep(seconds)  # noqa: ASYNC251 (on purpose: the loop stops, as under a slow command)
+    log.warning("fault point %s: the event loop runs again", point)
+
+
 _ACTIONS = {"pause": _pause, "crash": _crash}
 
 
@@ -84,7 +94,23 @@ def arm_from_env(environ: Mapping[str, str]) -> None:
     """
     for entry in filter(None, (e.strip() for e in environ.get(ENV, "").split(","))):
         point, _, name = entry.partition("=")
+        kind, _, text = name.partition(":")
+        seconds = _seconds(text) if kind == "block" else None
+        if seconds is not None:
+            arm(point, functools.partial(_block, point, seconds))
+            continue
         action = _ACTIONS.get(name)
         if action is None:
-            raise UsageError(f"{ENV}: {entry!r} is not POINT=pause or POINT=crash")
+            raise UsageError(
+                f"{ENV}: {entry!r} is not POINT=pause, POINT=crash or POINT=block:SECONDS"
+            )
         arm(point, functools.partial(action, point))
+
+
+def _seconds(text: str) -> float | None:
+    """`text` as a number of seconds, or None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if value >= 0 else None

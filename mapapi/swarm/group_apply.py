@@ -104,6 +104,8 @@ class GroupApplier:
         apply: applies one NORMAL entry to the store (any thread).
         on_applied: told on the loop what each applied entry did.
         on_halt: stops a group whose work failed.
+        on_drained: called on the loop once a group's queue is written (the
+            Ready loop defers what needs the chunk installed until then).
     """
 
     def __init__(
@@ -113,12 +115,14 @@ class GroupApplier:
         apply: ApplyFn,
         on_applied: AppliedHook | None,
         on_halt: HaltFn,
+        on_drained: Callable[[GroupState], None] = lambda group: None,
     ) -> None:
         self._store = store
         self._states = states
         self._apply = apply
         self._on_applied = on_applied
         self._on_halt = on_halt
+        self._on_drained = on_drained
         self._queues: dict[ChunkId, deque[Work]] = {}
         self._tasks: dict[ChunkId, asyncio.Task[None]] = {}
 
@@ -174,6 +178,7 @@ class GroupApplier:
             while queue:
                 done = await off_loop(self._store, self._write, chunk, queue[0])
                 self._finish(group, queue.popleft(), done)
+            self._on_drained(group)
         except asyncio.CancelledError:
             raise
         except Exception as exc:

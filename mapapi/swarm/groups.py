@@ -102,15 +102,11 @@ class RaftGroups:
         alive: Callable[[PeerId], bool] | None = None,
         on_applied: AppliedHook | None = None,
     ) -> None:
-        self.me = me
-        self._alive = alive
-        self.states = states
-        self.compact_after = compact_after
-        self._on_members = on_members
-        self.store = store
-        self.rpc = rpc
+        self.me, self.store, self.rpc, self.states = me, store, rpc, states
+        self._alive, self._on_members, self.compact_after = alive, on_members, compact_after
         self.mail = RaftMail(rpc, address, peers)
-        self.applier = GroupApplier(store, states, apply, on_applied, self._halt)
+        done = self._members_changed  # deferred while a snapshot is being installed
+        self.applier = GroupApplier(store, states, apply, on_applied, self._halt, done)
         self._options = replace(options or RaftOptions(), quiesce=alive is not None)
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
@@ -346,8 +342,7 @@ class RaftGroups:
 
     def rpc_raft_batch(self, req: Request) -> Ack:
         """Step every message of a batch into its group (`group_state.step_batch`),
-        then run their Ready loops. Peers send batches as notifications; one sent
-        as a request gets an `Ack`."""
+        then run their Ready loops; a batch sent as a request gets an `Ack`."""
         body: RaftBatch = req.body
         for group in step_batch(self._groups, node_id(self.me), req.sender, body.messages):
             self._process(group)
@@ -384,12 +379,17 @@ class RaftGroups:
                 log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
                 self._on_change()
             group.node.advance(rd)
-            if self._on_members is not None and group.node.config.members != group.members:
-                group.members = group.node.config.members
-                self._on_members(group.chunk, self.mail.peers(group.members))
+            if self.applier.idle(group.chunk):  # else once applied: a snapshot makes the chunk
+                self._members_changed(group)
             done = group.node.log.applied - group.node.log.snapshot.index
             if done >= self.compact_after:
                 self.applier.compact(group, group.node.log.applied)
+
+    def _members_changed(self, group: GroupState) -> None:
+        """Report the group's members if they changed (the store's holders follow)."""
+        if self._on_members is not None and group.node.config.members != group.members:
+            group.members = group.node.config.members
+            self._on_members(group.chunk, self.mail.peers(group.members))
 
     def _flush(self) -> None:
         """Send what every group queued (waiters re-check if anything left)."""
