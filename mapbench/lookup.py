@@ -31,7 +31,8 @@ from mapapi.core.errors import NetworkError
 from mapapi.lookup.dht.chord import ChordNode
 from mapapi.lookup.dht.ring import RING_SIZE, SortedRing
 from mapbench.ring import still_ring
-from mapbench.swarm import _environment, percentile
+from mapbench.swarm import environment as run_environment
+from mapbench.swarm import percentile
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +51,7 @@ def target_mean_hops(peers: int) -> float:
 def environment() -> dict[str, Any]:
     """The machine, Python and 1-minute load a plot's caption names: call it before
     the runs, whose own load would count otherwise."""
-    return _environment(use_uvloop=False, load=os.getloadavg()[0])
+    return run_environment(use_uvloop=False, load=os.getloadavg()[0])
 
 
 def measure_lookups(

@@ -21,6 +21,7 @@ import statistics
 import tempfile
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -34,22 +35,34 @@ RUN_DEADLINE = 300.0
 Writer = Literal["leader", "follower"]
 
 
+def join_swarm(workers: Sequence[WorkerProcess]) -> None:
+    """Join every worker to the swarm through the first."""
+    for worker in workers[1:]:
+        worker.call("joined", "join", workers[0].address)
+
+
+def expect_holders(workers: Sequence[WorkerProcess], chunk: str, count: int) -> None:
+    """Check that each of `workers` knows `count` holders of `chunk`.
+
+    Raises:
+        SwarmCheckFailed: naming the worker and what it knows.
+    """
+    for worker in workers:
+        holders = worker.call("holders", "holders", chunk)["holders"]
+        if len(holders) != count:
+            raise SwarmCheckFailed(
+                f"{worker.name} knows {len(holders)} holders of chunk {chunk}, expected {count}"
+            )
+
+
 def counter_swarm(workers: Sequence[WorkerProcess], a0: int = 0) -> tuple[str, str]:
     """Join every worker through the first, create the counter chunk on the first
     and make every other worker participate; returns (chunk id, item id)."""
-    first = workers[0]
-    for worker in workers[1:]:
-        worker.call("joined", "join", first.address)
-    created = first.call("created", "create", a0)
+    join_swarm(workers)
+    created = workers[0].call("created", "create", a0)
     for worker in workers[1:]:
         worker.call("participating", "participate", created["chunk"])
-    for worker in workers:
-        holders = worker.call("holders", "holders", created["chunk"])["holders"]
-        if len(holders) != len(workers):
-            raise SwarmCheckFailed(
-                f"{worker.name} knows {len(holders)} holders of the counter chunk, "
-                f"expected {len(workers)}"
-            )
+    expect_holders(workers, created["chunk"], len(workers))
     return created["chunk"], created["item"]
 
 
@@ -65,20 +78,33 @@ def run_increments(
     return reports, time.perf_counter() - start
 
 
-def _traffic(workers: Sequence[WorkerProcess]) -> tuple[int, dict[str, int], float]:
-    """Messages sent (in all, and by type) and CPU seconds used, summed over workers."""
-    total, cpu = 0, 0.0
+@dataclass(frozen=True, slots=True)
+class Traffic:
+    """What every worker sent so far, summed: messages (in all and by type),
+    bytes, and CPU seconds used."""
+
+    messages: int
+    bytes: int
+    by_type: dict[str, int]
+    cpu_s: float
+
+
+def traffic(workers: Sequence[WorkerProcess]) -> Traffic:
+    """The workers' traffic and CPU counters now, summed (`stats`)."""
+    total, size, cpu = 0, 0, 0.0
     by_type: dict[str, int] = {}
     for worker in workers:
         stats = worker.call("stats", "stats")
         total += stats["sent"]
+        size += stats["sent_bytes"]
         cpu += stats["cpu_s"]
         for name, count in stats["sent_by_type"].items():
             by_type[name] = by_type.get(name, 0) + count
-    return total, by_type, cpu
+    return Traffic(total, size, by_type, cpu)
 
 
-def _diff(after: dict[str, int], before: dict[str, int]) -> dict[str, int]:
+def diff(after: dict[str, int], before: dict[str, int]) -> dict[str, int]:
+    """The counts that grew from `before` to `after`, by how much."""
     return {k: v - before.get(k, 0) for k, v in sorted(after.items()) if v - before.get(k, 0)}
 
 
@@ -90,7 +116,8 @@ def percentile(values: Sequence[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(len(ordered) * q))]
 
 
-def _environment(use_uvloop: bool, load: float, secure: bool = False) -> dict[str, Any]:
+def environment(use_uvloop: bool, load: float, secure: bool = False) -> dict[str, Any]:
+    """What a figure was measured on: loop, Python, machine, load before the run."""
     return {
         "secure": secure,
         "loop": "uvloop" if use_uvloop else "asyncio",
@@ -100,7 +127,8 @@ def _environment(use_uvloop: bool, load: float, secure: bool = False) -> dict[st
     }
 
 
-def _scratch(directory: str | Path | None) -> tempfile.TemporaryDirectory[str]:
+def scratch(directory: str | Path | None) -> tempfile.TemporaryDirectory[str]:
+    """A scratch folder for the workers' repositories (in `directory` if given)."""
     return tempfile.TemporaryDirectory(prefix="mapapi-swarm-", dir=directory)
 
 
@@ -129,11 +157,11 @@ def viewtest(
         raise ValueError(f"peers and n must be at least 1, got {peers} and {n}")
     load = os.getloadavg()[0]
     spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
-    with _scratch(directory) as tmp, spawn(peers, Path(tmp)) as ws:
+    with scratch(directory) as tmp, spawn(peers, Path(tmp)) as ws:
         _, item = counter_swarm(ws, a0)
-        sent0, types0, cpu0 = _traffic(ws)
+        before = traffic(ws)
         reports, seconds = run_increments(ws, n, item, deadline)
-        sent1, types1, cpu1 = _traffic(ws)
+        after = traffic(ws)
         values = [w.call("value", "value", item) for w in ws]
         logs = [w.call("log", "log")["ids"] for w in ws]
     commits = peers * n
@@ -157,12 +185,12 @@ def viewtest(
         "conflicts": sum(r["conflicts"] for r in reports),
         "lock_timeouts": sum(r["lock_timeouts"] for r in reports),
         "other_retries": sum(r["other_retries"] for r in reports),
-        "messages_per_commit": round((sent1 - sent0) / commits, 2),
-        "messages_by_type": _diff(types1, types0),
-        "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / commits, 3),
+        "messages_per_commit": round((after.messages - before.messages) / commits, 2),
+        "messages_by_type": diff(after.by_type, before.by_type),
+        "cpu_ms_per_commit": round((after.cpu_s - before.cpu_s) * 1e3 / commits, 3),
         "seconds": round(seconds, 3),
         "a0": a0,
-        **_environment(use_uvloop, load, secure),
+        **environment(use_uvloop, load, secure),
     }
 
 
@@ -217,14 +245,14 @@ def commit_latency(
         raise ValueError(f"holders and n must be at least 1, got {holders} and {n}")
     load = os.getloadavg()[0]
     spawn = functools.partial(spawn_workers, use_uvloop=use_uvloop, secure=secure)
-    with _scratch(directory) as tmp, spawn(holders, Path(tmp)) as ws:
+    with scratch(directory) as tmp, spawn(holders, Path(tmp)) as ws:
         _, item = counter_swarm(ws)
         chosen = ws[0] if writer == "leader" else ws[-1]  # ws[0] made the chunk: it leads
         if warmup:
             run_increments([chosen], warmup, item)
-        sent0, types0, cpu0 = _traffic(ws)
+        before = traffic(ws)
         (report,), _ = run_increments([chosen], n, item)
-        sent1, types1, cpu1 = _traffic(ws)
+        after = traffic(ws)
         values = {w.call("value", "value", item)["value"] for w in ws}
     if values != {warmup + n}:
         raise SwarmCheckFailed(f"holders read {sorted(values)}, expected {warmup + n}")
@@ -237,9 +265,9 @@ def commit_latency(
         "p99_ms": round(percentile(latencies, 0.99), 3),
         "mean_ms": round(statistics.fmean(latencies), 3),
         "commits_per_s": round(n / report["seconds"], 1),
-        "messages_per_commit": round((sent1 - sent0) / n, 2),
-        "messages_by_type": _diff(types1, types0),
-        "cpu_ms_per_commit": round((cpu1 - cpu0) * 1e3 / n, 3),
+        "messages_per_commit": round((after.messages - before.messages) / n, 2),
+        "messages_by_type": diff(after.by_type, before.by_type),
+        "cpu_ms_per_commit": round((after.cpu_s - before.cpu_s) * 1e3 / n, 3),
         "aborts": report["aborts"],
-        **_environment(use_uvloop, load, secure),
+        **environment(use_uvloop, load, secure),
     }

@@ -21,7 +21,10 @@ which step finished:
                                           "sent_by_type"}
     value ITEM                    -> value {"value", "log"}
     log                           -> log {"ids"}                   newest first
-    stats                         -> stats {"cpu_s", "sent", "received", "sent_by_type"}
+    stats                         -> stats {"cpu_s", "sent", "sent_bytes", "received",
+                                            "sent_by_type"}
+    robot | seed | stream | digest                                 a mapping robot's
+                                  commands (`bench mapping`), see `mapbench.robot`
     quit                          -> bye {}                        then the process exits
 
 `run` is paper Algorithm 1: N times, begin a transaction, read the counter,
@@ -53,6 +56,7 @@ from mapapi.core.table import message_class
 from mapapi.net.security import parse_key
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
+from mapbench import robot
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +90,7 @@ class Worker:
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
         self.counter = message_class(TYPE)
+        self.robot = robot.Robot(peer)
 
     def _stats(self) -> Any:
         assert self.peer.swarm is not None
@@ -94,6 +99,8 @@ class Worker:
     async def handle(self, words: list[str]) -> tuple[str, dict[str, Any]]:
         """Run one command; returns the reply word and its JSON body."""
         verb, args = words[0], words[1:]
+        if verb in robot.COMMANDS:
+            return await self.robot.handle(verb, args)
         if verb == "join":
             members = await self.peer.join(_arg(args, 0))
             return "joined", {"members": len(members)}
@@ -122,6 +129,7 @@ class Worker:
             return "stats", {
                 "cpu_s": time.process_time(),
                 "sent": sum(t.messages for t in stats.sent.values()),
+                "sent_bytes": sum(t.bytes for t in stats.sent.values()),
                 "received": sum(t.messages for t in stats.received.values()),
                 "sent_by_type": {k: t.messages for k, t in stats.sent_by_type().items()},
             }

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from mapctl.commands import bench_faults, bench_maps
+from mapctl.commands import bench_faults, bench_mapping, bench_maps
 from mapctl.commands.bench_options import (
     DIR_OPTION,
     SAMPLES_OPTION,
@@ -360,7 +360,7 @@ def bench_plot(kind: str, results: tuple[str, ...], output: str) -> None:
     (plot_viewtest if kind == "viewtest" else plot_commit)(rows, output)
 
 
-for _command in (*bench_faults.COMMANDS, *bench_maps.COMMANDS):
+for _command in (*bench_faults.COMMANDS, *bench_maps.COMMANDS, *bench_mapping.COMMANDS):
     bench.add_command(_command)
 
 
