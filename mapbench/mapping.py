@@ -7,11 +7,13 @@ mission into the map tables (`mapapi.maps.schema`): a chunk of the `vertices`
 table and one of `edges`, each held by K peers (the robot and the K-1 next
 ones, round the ring of robots), so each is a Raft group of K members. The
 robots then stream for S seconds at once, each on its own
-(`mapbench.robot`): commits of 10-100 vertices, then of their odometry edges;
-5 % of the edges are inter-robot edges, each committed into the robot's edge
-chunk and the other robot's at once (a two-phase commit across both groups).
-A peer writes only chunks it holds, so a robot's inter-robot edges go to the
-K-1 robots whose chunks it holds (with K = 1 there are none).
+(`mapbench.robot`): commits of 10-100 vertices, then of their edges. 5 % of
+the edges are inter-robot edges, each written into the robot's edge chunk and,
+as a copy, into the other robot's: the edge commit then writes several chunks
+(a two-phase commit across their groups); with `alone`, each inter-robot edge
+is a two-chunk commit of its own instead. A peer writes only chunks it holds,
+so a robot's inter-robot edges go to the K-1 robots whose chunks it holds
+(with K = 1 there are none).
 
 Afterwards every holder's replica of every chunk, caught up with the chunk's
 leader, must hold exactly the items the writers had acknowledged
@@ -57,12 +59,15 @@ class Workload:
         batch: the smallest and largest number of vertices of one commit (its
             odometry edges follow in the next).
         cross: the share of edges that end at another robot's vertex.
+        alone: commit each such edge on its own (else with the robot's other
+            edges of the round, which then makes that commit multi-chunk).
         seed: seeds robot i's choices with seed + i.
     """
 
     seconds: float = 10.0
     batch: tuple[int, int] = (10, 100)
     cross: float = 0.05
+    alone: bool = False
     seed: int = 0
 
 
@@ -133,6 +138,7 @@ def mapping(
         "messages_by_type": diff(after.by_type, before.by_type),
         "batch": [low, high],
         "cross": workload.cross,
+        "cross_alone": workload.alone,
         "chunks": _chunk_digests(ws, made, holders, reports, held),
         **environment(use_uvloop, load),
     }
@@ -149,7 +155,7 @@ def _latency(name: str, values: Sequence[float]) -> dict[str, float | None]:
 def _place_chunks(ws: Sequence[WorkerProcess], holders: int) -> list[dict[str, str]]:
     """Join the swarm; each robot makes its chunks, the K-1 next robots hold them."""
     join_swarm(ws)
-    made = [w.call("robot", "robot") for w in ws]
+    made = [w.call("robot", "robot", i) for i, w in enumerate(ws)]
     for i, chunks in enumerate(made):
         group = [ws[(i + j) % len(ws)] for j in range(holders)]
         for chunk in (chunks["vertices"], chunks["edges"]):
@@ -174,7 +180,8 @@ def _stream(
     for i, worker in enumerate(ws):
         held = [made[(i - j) % len(ws)] for j in range(1, holders)]
         others = [f"{m['mission']}={m['edges']}" for m in held]
-        args = (workload.seconds, low, high, workload.cross, workload.seed + i, *others)
+        alone = int(workload.alone)
+        args = (workload.seconds, low, high, workload.cross, alone, workload.seed + i, *others)
         worker.send("stream", *args)
     reports = [w.reply("streamed", workload.seconds + STREAM_GRACE) for w in ws]
     return reports, time.perf_counter() - started

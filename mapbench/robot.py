@@ -1,9 +1,9 @@
 """A mapping robot inside a `mapbench.worker` process: the workload of `mapctl
 bench mapping` (see `mapbench.mapping`), driven over the worker's line protocol:
 
-    robot                         -> robot {"mission", "vertices", "edges"}
+    robot INDEX                   -> robot {"mission", "vertices", "edges"}
     seed N                        -> seeded {"items"}
-    stream S LOW HIGH CROSS SEED [MISSION=CHUNK ...]
+    stream S LOW HIGH CROSS ALONE SEED [MISSION=CHUNK ...]
                                   -> streamed {"items", "single_ms", "multi_ms",
                                                "retries", "seconds", "cpu_s", "acked"}
     digest                        -> digest {"chunks": {chunk: [count, hash]}}
@@ -13,10 +13,12 @@ the `vertices` table, one of `edges` (a chunk belongs to one table), its
 mission named after the peer. `seed N` commits vertices 0..N-1, which the other
 robots' inter-robot edges may end at. `stream` then writes for S seconds:
 a commit of LOW..HIGH new vertices into the vertex chunk, then a commit of
-their odometry edges into the edge chunk, and so on; each edge is, with
-probability CROSS, an inter-robot edge to a seeded vertex of one of the other
-missions named, committed on its own into this robot's edge chunk and that
-robot's (a two-chunk transaction: two-phase commit across both groups).
+their edges into the edge chunk, and so on. Each edge is, with probability
+CROSS, an inter-robot edge to a seeded vertex of one of the other missions
+named, written into this robot's edge chunk and, as a copy, into that robot's:
+the edge commit then writes several chunks (a two-phase commit across their
+groups). With ALONE = 1 each inter-robot edge is committed on its own instead
+(two items, two chunks), and the edge commit holds the odometry edges alone.
 
 Every item acknowledged is remembered per chunk as a digest (count, and the sum
 of a 64-bit hash of each item id), which `digest` computes on a holder from its
@@ -26,6 +28,7 @@ replica, caught up with the chunk's leader: equal digests, the same items.
 from __future__ import annotations
 
 import hashlib
+import math
 import random
 import time
 from collections import Counter as Tally
@@ -55,6 +58,12 @@ MAX_ATTEMPTS = 50
 INFORMATION = tuple(100.0 if row == col else 0.0 for row in range(6) for col in range(row, 6))
 """An identity-like 6x6 information matrix, upper triangle (21 values)."""
 _MASK = (1 << 64) - 1
+STEP, RADIUS, CELL = 0.1, 15.0, 64.0
+"""Metres between poses (10 Hz at 1 m/s), of the circle each robot drives round
+(its box stops growing after the first lap, 942 poses), and of a cell of the
+default spatial grid (`mapapi.lookup.spatial.DEFAULT_CELLS`): each robot drives
+inside its own cell, so its chunks' boxes, which peers announce in the spatial
+index each time they grow, soon stop changing."""
 
 
 def item_hash(item: str) -> int:
@@ -97,6 +106,27 @@ class _Run:
 Writes = list[tuple[str, ChunkId, list[Message]]]
 
 
+@dataclass(frozen=True, slots=True)
+class Stream:
+    """What one `stream` writes (module docstring).
+
+    Attributes:
+        seconds: how long it streams.
+        batch: the fewest and most vertices of one commit.
+        cross: the share of edges that are inter-robot edges.
+        alone: each inter-robot edge in a commit of its own, not with the others.
+        seed: seeds the choices.
+        targets: mission -> edge chunk of the robots whose chunks this one holds.
+    """
+
+    seconds: float
+    batch: tuple[int, int]
+    cross: float
+    alone: bool
+    seed: int
+    targets: dict[str, str]
+
+
 class Robot:
     """One robot's mission, its two chunks and what it had acknowledged.
 
@@ -112,25 +142,36 @@ class Robot:
         self.next_index = 0
         self.seeded = 0
         self.acked: dict[str, Digest] = {}
+        self.centre = (0.0, 0.0)
 
     async def handle(self, verb: str, args: list[str]) -> tuple[str, dict[str, Any]]:
         """Run one command of the module docstring; returns the reply word and body."""
         if verb == "robot":
-            return "robot", await self.create()
+            return "robot", await self.create(int(args[0]) if args else 0)
         if verb == "seed":
             return "seeded", {"items": await self.seed(int(args[0]))}
         if verb == "stream":
-            if len(args) < 5:
-                raise UsageError("stream takes SECONDS LOW HIGH CROSS SEED [MISSION=CHUNK ...]")
-            low, high, cross, seed = int(args[1]), int(args[2]), float(args[3]), int(args[4])
-            targets = dict(t.split("=", 1) for t in args[5:])
-            return "streamed", await self.stream(float(args[0]), (low, high), cross, seed, targets)
+            if len(args) < 6:
+                raise UsageError(
+                    "stream takes SECONDS LOW HIGH CROSS ALONE SEED [MISSION=CHUNK ...]"
+                )
+            spec = Stream(
+                seconds=float(args[0]),
+                batch=(int(args[1]), int(args[2])),
+                cross=float(args[3]),
+                alone=args[4] == "1",
+                seed=int(args[5]),
+                targets=dict(t.split("=", 1) for t in args[6:]),
+            )
+            return "streamed", await self.stream(spec)
         if verb == "digest":
             return "digest", {"chunks": await self.digest()}
         raise UsageError(f"unknown robot command {verb!r}")
 
-    async def create(self) -> dict[str, Any]:
-        """The map tables (if missing) and this robot's vertex and edge chunks."""
+    async def create(self, index: int) -> dict[str, Any]:
+        """The map tables (if missing) and this robot's vertex and edge chunks;
+        robot `index` drives round its own cell of the default spatial grid."""
+        self.centre = (CELL * (index % 16 + 0.5), CELL * (index // 16 + 0.5))
         await ensure_tables(self.peer)
         self.vertices = await self.peer.create_chunk(VERTICES)
         self.edges = await self.peer.create_chunk(EDGES)
@@ -148,35 +189,19 @@ class Robot:
         self.seeded = count
         return count
 
-    async def stream(
-        self,
-        seconds: float,
-        batch: tuple[int, int],
-        cross: float,
-        seed: int,
-        targets: dict[str, str],
-    ) -> dict[str, Any]:
-        """Commit vertices and their edges for `seconds` (module docstring)."""
-        vertices, edges = self._chunks()
-        rng = random.Random(seed)
+    async def stream(self, spec: Stream) -> dict[str, Any]:
+        """Commit vertices and their edges for `spec.seconds` (module docstring)."""
+        vertices, _ = self._chunks()
+        rng = random.Random(spec.seed)
         run = _Run()
         cpu0, clock = time.process_time(), time.perf_counter
         started = clock()
-        while clock() - started < seconds:
+        while clock() - started < spec.seconds:
             first = self.next_index
-            new = self._new_vertices(rng.randint(*batch))
+            new = self._new_vertices(rng.randint(*spec.batch))
             await self._commit([(VERTICES, vertices, new)], run)
-            odometry: list[Message] = []
-            for index in range(max(first, 1), self.next_index):
-                if targets and self.seeded and rng.random() < cross:
-                    mission = rng.choice(sorted(targets))
-                    edge = self._edge(index, (mission, rng.randrange(self.seeded)))
-                    pair = [(EDGES, edges, [edge]), (EDGES, ChunkId(targets[mission]), [edge])]
-                    await self._commit(pair, run)
-                else:
-                    odometry.append(self._edge(index - 1, (self.mission, index)))
-            if odometry:
-                await self._commit([(EDGES, edges, odometry)], run)
+            for writes in self._edge_commits(first, spec, rng):
+                await self._commit(writes, run)
         return {
             "items": run.items,
             "single_ms": [round(x, 3) for x in run.single_ms],
@@ -187,17 +212,47 @@ class Robot:
             "acked": {chunk: digest.pair() for chunk, digest in self.acked.items()},
         }
 
+    def _edge_commits(self, first: int, spec: Stream, rng: random.Random) -> list[Writes]:
+        """The commits of the edges ending at vertices `first`.. (the newest): the
+        odometry edges and the inter-robot ones with their copies in the other
+        robots' chunks, together or (`spec.alone`) each inter-robot edge apart."""
+        _, edges = self._chunks()
+        batch: list[Message] = []
+        copies: dict[ChunkId, list[Message]] = {}
+        alone: list[Writes] = []
+        for index in range(max(first, 1), self.next_index):
+            if not (spec.targets and self.seeded and rng.random() < spec.cross):
+                batch.append(self._edge(index - 1, (self.mission, index)))
+                continue
+            mission = rng.choice(sorted(spec.targets))
+            edge = self._edge(index, (mission, rng.randrange(self.seeded)))
+            other = ChunkId(spec.targets[mission])
+            if spec.alone:
+                alone.append([(EDGES, edges, [edge]), (EDGES, other, [edge])])
+            else:
+                batch.append(edge)
+                copies.setdefault(other, []).append(edge)
+        together: Writes = [(EDGES, edges, batch)] if batch else []
+        together += [(EDGES, chunk, messages) for chunk, messages in copies.items()]
+        return [*alone, together] if together else alone
+
     def _new_vertices(self, count: int) -> list[Message]:
         first, self.next_index = self.next_index, self.next_index + count
         return [
             Vertex(
                 mission=self.mission,
                 index=i,
-                pose=Pose3(x=0.5 * i, y=0.1 * (i % 7), qw=1.0),
+                pose=self._pose(i),
                 timestamp=0.1 * i,
             )
             for i in range(first, self.next_index)
         ]
+
+    def _pose(self, index: int) -> Message:
+        """Where vertex `index` lies: `STEP` m further round a circle of `RADIUS` m."""
+        angle = index * STEP / RADIUS
+        x, y = self.centre[0] + RADIUS * math.cos(angle), self.centre[1] + RADIUS * math.sin(angle)
+        return Pose3(x=x, y=y, qz=math.sin(angle / 2), qw=math.cos(angle / 2))
 
     def _edge(self, source: int, target: tuple[str, int]) -> Message:
         """An edge of this mission from its vertex `source` to `target`."""

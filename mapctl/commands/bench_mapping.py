@@ -22,6 +22,11 @@ def _option(flag: str, short: str, default: object, kind: click.ParamType, text:
 @_option(
     "--cross", "-x", 0.05, click.FloatRange(0, 1), "Share of inter-robot edges (2-chunk commits)."
 )
+@click.option(
+    "--cross-alone",
+    is_flag=True,
+    help="Commit each inter-robot edge on its own (else with the robot's other edges).",
+)
 @click.option("--seed", default=0, show_default=True, help="Seeds the robots' choices.")
 @DIR_OPTION
 @UVLOOP_OPTION
@@ -32,6 +37,7 @@ def bench_mapping(
     seconds: float,
     batch: str,
     cross: float,
+    cross_alone: bool,
     seed: int,
     directory: str | None,
     use_uvloop: bool,
@@ -54,7 +60,7 @@ def bench_mapping(
         raise click.BadParameter(f"{batch!r} is not LOW:HIGH", param_hint="--batch") from None
     if not 1 <= sizes[0] <= sizes[1]:
         raise click.BadParameter("need 1 <= LOW <= HIGH", param_hint="--batch")
-    workload = Workload(seconds=seconds, batch=sizes, cross=cross, seed=seed)
+    workload = Workload(seconds=seconds, batch=sizes, cross=cross, alone=cross_alone, seed=seed)
     result = mapping(robots, holders, workload, directory=directory, use_uvloop=use_uvloop)
     measures(f"bench mapping: {robots} robots, {holders} holders", result, as_json)
     check_mapping(result)

@@ -19,11 +19,12 @@ from mapctl.cli import cli
 
 @pytest.mark.slow
 @pytest.mark.timeout(60)
-def test_every_acknowledged_item_is_on_every_holder(tmp_path: Path) -> None:
+@pytest.mark.parametrize("mode", [[], ["--cross-alone"]], ids=["with-the-batch", "alone"])
+def test_every_acknowledged_item_is_on_every_holder(tmp_path: Path, mode: list[str]) -> None:
     robots, holders = 3, 2
     args = ["bench", "mapping", "-p", robots, "-k", holders, "-s", "1", "--batch", "10:20"]
     result = CliRunner().invoke(
-        cli, [*map(str, args), "--cross", "0.2", "--dir", str(tmp_path), "--json"]
+        cli, [*map(str, args), *mode, "--cross", "0.2", "--dir", str(tmp_path), "--json"]
     )
 
     assert result.exit_code == 0, result.output
