@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import os
+import statistics
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -123,6 +124,7 @@ def mapping(
         "seconds": round(seconds, 3),
         "items": items,
         "items_per_s": round(items / seconds, 1),
+        **_halves(reports, workload.seconds),
         "commits": len(single) + len(multi),
         "multi_chunk_commits": len(multi),
         **_latency("commit", single + multi),
@@ -134,6 +136,7 @@ def mapping(
         "retries": sum(retries.values()),
         "retries_by_kind": retries,
         "cpu_ms_per_item": round((after.cpu_s - before.cpu_s) * 1e3 / max(items, 1), 4),
+        "peer_cores_used": round((after.cpu_s - before.cpu_s) / seconds, 2),
         "robot_items_per_s": [round(r["items"] / r["seconds"], 1) for r in reports],
         "messages_by_type": diff(after.by_type, before.by_type),
         "batch": [low, high],
@@ -141,6 +144,18 @@ def mapping(
         "cross_alone": workload.alone,
         "chunks": _chunk_digests(ws, made, holders, reports, held),
         **environment(use_uvloop, load),
+    }
+
+
+def _halves(reports: Sequence[dict[str, Any]], seconds: float) -> dict[str, float]:
+    """Items/s of every robot together in the first and the second half of the
+    time: whether the rate holds as the chunks grow."""
+    first = sum(r["items_first_half"] for r in reports)
+    rest = sum(r["items"] for r in reports) - first
+    late = max(statistics.fmean(r["seconds"] for r in reports) - seconds / 2, 1e-9)
+    return {
+        "items_per_s_first_half": round(first / (seconds / 2), 1),
+        "items_per_s_second_half": round(rest / late, 1),
     }
 
 

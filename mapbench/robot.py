@@ -4,7 +4,8 @@ bench mapping` (see `mapbench.mapping`), driven over the worker's line protocol:
     robot INDEX                   -> robot {"mission", "vertices", "edges"}
     seed N                        -> seeded {"items"}
     stream S LOW HIGH CROSS ALONE SEED [MISSION=CHUNK ...]
-                                  -> streamed {"items", "single_ms", "multi_ms",
+                                  -> streamed {"items", "items_first_half",
+                                               "single_ms", "multi_ms",
                                                "retries", "seconds", "cpu_s", "acked"}
     digest                        -> digest {"chunks": {chunk: [count, hash]}}
 
@@ -196,7 +197,10 @@ class Robot:
         run = _Run()
         cpu0, clock = time.process_time(), time.perf_counter
         started = clock()
+        half = 0  # items acknowledged in the first half of the time
         while clock() - started < spec.seconds:
+            if clock() - started < spec.seconds / 2:
+                half = run.items
             first = self.next_index
             new = self._new_vertices(rng.randint(*spec.batch))
             await self._commit([(VERTICES, vertices, new)], run)
@@ -204,6 +208,7 @@ class Robot:
                 await self._commit(writes, run)
         return {
             "items": run.items,
+            "items_first_half": half,
             "single_ms": [round(x, 3) for x in run.single_ms],
             "multi_ms": [round(x, 3) for x in run.multi_ms],
             "retries": dict(run.retries),
