@@ -298,13 +298,14 @@ class Robot:
     async def digest(self) -> dict[str, list[int]]:
         """The digest of every map chunk held here, read once caught up with its leader."""
         found: dict[str, list[int]] = {}
-        for info in self.peer.chunks():
-            if info.table not in (VERTICES, EDGES):
+        for chunk in self.peer.store.chunk_ids():  # not peer.chunks(): it counts items
+            table = self.peer.chunk_table(chunk)
+            if table not in (VERTICES, EDGES):
                 continue
-            at = await self.peer.catch_up(self.peer.now(), chunk=info.id)
+            at = await self.peer.catch_up(self.peer.now(), chunk=chunk)
             digest = Digest()
-            digest.add([r.item_id for r in await self.peer.scan(at, info.table, info.id)])
-            found[str(info.id)] = digest.pair()
+            digest.add([r.item_id for r in await self.peer.scan(at, table, chunk)])
+            found[str(chunk)] = digest.pair()
         return found
 
 
