@@ -105,7 +105,9 @@ async def _rejoin_any(peer: Peer, seeds: Sequence[str]) -> None:
 
 
 async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
-    """`seeds` with the first one to answer a ping moved to the front.
+    """`seeds` with the first one to answer a ping moved to the front; none if
+    none answers (a swarm restarting as a whole: the first peer up serves at
+    once, and the others, which remember it, join it as they start).
 
     All are pinged at once: remembered members that since stopped, or restarted on
     other ports, would otherwise each cost a join's whole timeout in turn.
@@ -124,7 +126,7 @@ async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
     for seed in seeds:
         if seed != first:
             await rpc.forget(seed)  # no reconnecting socket to a member that moved
-    return list(seeds) if first is None else [first, *(s for s in seeds if s != first)]
+    return [] if first is None else [first, *(s for s in seeds if s != first)]
 
 
 async def serve(
@@ -247,10 +249,13 @@ REMEMBER_PERIOD = 2.0
 
 
 async def _keep_members(repo: Repository, peer: Peer) -> None:
-    """Remember the other members' addresses whenever they change (`known_peers`)."""
+    """Remember the other members' addresses whenever they change (`known_peers`):
+    those that said goodbye too, as they come back to the same chunks' groups."""
     known: set[str] | None = None
     while True:
-        current = {s.member.address for s in peer.members() if s.member.address}
+        departed = peer.swarm.members.departed() if peer.swarm is not None else []
+        members = [*(s.member for s in peer.members()), *departed]
+        current = {m.address for m in members if m.address}
         if current and current != known:
             try:
                 known_peers.remember(repo, current)

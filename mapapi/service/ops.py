@@ -288,7 +288,13 @@ class RepoOperations:
             rows = [{"id": c.chunk, "table": c.table, "items": c.items} for c in chunks]
         else:
             rows = [
-                {"id": c.id, "table": c.table, "items": c.items, "holders": self.peer.holders(c.id)}
+                {
+                    "id": c.id,
+                    "table": c.table,
+                    "items": c.items,
+                    "holders": self.peer.holders(c.id),
+                    "roles": {str(p): r for p, r in self.peer.roles(c.id).items()},
+                }
                 for c in self.peer.chunks(table)
             ]
         return {"chunks": rows}

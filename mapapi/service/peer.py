@@ -235,6 +235,16 @@ class Peer:
         self.store.chunk_table(chunk_id)
         return self.store.holders(chunk_id) or [self.id]
 
+    def roles(self, chunk_id: ChunkId) -> dict[PeerId, str]:
+        """Each holder's role in the chunk's Raft group ("leader", "voter",
+        "learner"), as this peer knows it; empty while it is not on the network."""
+        holders = self.holders(chunk_id)
+        if self.swarm is None or not self.swarm.replicator.holds(chunk_id):
+            return {}
+        from mapapi.swarm.group_members import roles  # the network stack: loaded on it only
+
+        return roles(self.swarm.groups, chunk_id, holders)
+
     async def peer_chunks(self, address: str, table: str | None = None) -> list[ChunkSummary]:
         """The chunks the peer at `address` holds (lookup by peer, DESIGN §7).
 

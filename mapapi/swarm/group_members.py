@@ -60,7 +60,18 @@ async def change_members(
         NotChunkLeader: this peer does not lead the chunk (or stopped leading).
         RequestTimeout: the changes did not all apply within `timeout`.
     """
-    wanted = {node_id(p) for p in holders}
+    return await change_nodes(groups, chunk, {node_id(p) for p in holders}, factor, timeout)
+
+
+async def change_nodes(
+    groups: RaftGroups,
+    chunk: ChunkId,
+    wanted: set[int],
+    factor: int = DEFAULT_REPLICATION,
+    timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
+) -> Config:
+    """`change_members` by node ids: the members wanted, whether this peer can name
+    them (reach them) or not."""
     me = node_id(groups.me)
     loop = asyncio.get_running_loop()
     patience = loop.time() + CATCH_UP_WAIT
@@ -86,6 +97,22 @@ async def change_members(
             "(too few voters reachable)"
         ) from None
     return groups.config(chunk)
+
+
+def roles(groups: RaftGroups, chunk: ChunkId, holders: Iterable[PeerId]) -> dict[PeerId, str]:
+    """Each holder's role in the chunk's group as this member knows it: "leader",
+    "voter" or "learner" (a holder the configuration does not name yet: "joining")."""
+    config, leader = groups.config(chunk), groups.leader(chunk)
+
+    def role(peer: PeerId) -> str:
+        if peer == leader:
+            return "leader"
+        node = node_id(peer)
+        if node in config.voters:
+            return "voter"
+        return "learner" if node in config.members else "joining"
+
+    return {p: role(p) for p in holders}
 
 
 class GroupMembers:
@@ -211,8 +238,11 @@ class GroupMembers:
         # One change of a chunk's members at a time, each from the members then: two
         # joins computed side by side would each take the other out again.
         async with self._changing.setdefault(chunk, asyncio.Lock()):
-            holders = {groups.me, *groups.members(chunk)} | ({add} if add else set())
-            config = await change_members(groups, chunk, holders - {drop}, self.factor)
+            # from the configuration, not the members this peer can name: a member
+            # that said goodbye (stopped) is still one, until it leaves or dies
+            wanted = set(groups.config(chunk).members) | ({node_id(add)} if add else set())
+            wanted -= {node_id(drop)} if drop else set()
+            config = await change_nodes(groups, chunk, wanted, self.factor)
         members = tuple(sorted(groups.mail.peers(config.members)))
         return GroupChanged(groups.applied(chunk), members)
 
@@ -230,11 +260,12 @@ class GroupMembers:
             for peer in dead:
                 self._dead_since.setdefault(peer, now)
             gone = [p for p in dead if now - self._dead_since[p] >= self.remove_after]
-            living = {self.groups.me, *members} - set(gone)
-            wanted = {node_id(p) for p in living}
+            config = self.groups.config(chunk)
+            # only members declared dead long enough go (one this peer cannot name,
+            # say after its goodbye, stays: it is stopped, not gone)
+            wanted = set(config.members) - {node_id(p) for p in gone}
             me = node_id(self.groups.me)
             ready = self.groups.promotable(chunk)
-            config = self.groups.config(chunk)
             if len(config.voters - {node_id(p) for p in dead}) <= len(config.voters) // 2:
                 # no majority would commit the change: proposing it would only
                 # shrink this leader's view of the configuration (a change takes
@@ -244,7 +275,7 @@ class GroupMembers:
                 continue  # nothing to do, or only a learner to promote that lags
             try:
                 async with self._changing.setdefault(chunk, asyncio.Lock()):
-                    await change_members(self.groups, chunk, living, self.factor)
+                    await change_nodes(self.groups, chunk, wanted, self.factor)
             except (NotChunkLeader, RequestTimeout) as exc:  # the next round tries again
                 log.warning("chunk %s: dead members not removed yet: %s", chunk.short, exc)
                 continue

@@ -16,7 +16,7 @@ from mapapi.core.errors import CorruptRepoError, ProposalLost, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.raft import RaftNode
-from mapapi.swarm.raft_types import NONE, Entry, Ready, Role
+from mapapi.swarm.raft_types import NONE, Entry, PersistentState, Ready, Role
 from mapapi.swarm.raft_wire import from_wire, node_id, rows
 
 if TYPE_CHECKING:
@@ -120,6 +120,14 @@ def persist(store: ReplicaStore, chunk: ChunkId, rd: Ready) -> None:
         entries=rows(rd.entries),
         snapshot=None if snap is None else (snap.index, snap.term, snap.config.encode(), snap.data),
     )
+
+
+def persist_founding(store: ReplicaStore, chunk: ChunkId, boot: PersistentState) -> None:
+    """Persist a founding member's first state: the configuration entry, applied,
+    and the chunk's clock at its newest commit (a history from before the group)."""
+    store.raft_save(chunk, hard=(1, NONE, 1), entries=rows(boot.entries))
+    newest = max((c.time for c in store.chunk_commits(chunk)), default=0)
+    store.raft_applied(chunk, 1, newest)
 
 
 def compact(store: ReplicaStore, group: GroupState, data: bytes, index: int) -> None:

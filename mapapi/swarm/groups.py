@@ -40,6 +40,7 @@ from mapapi.swarm.group_state import (
     halted,
     not_committed,
     persist,
+    persist_founding,
     step_batch,
 )
 from mapapi.swarm.raft import RaftNode
@@ -53,7 +54,7 @@ from mapapi.swarm.raft_types import (
     RaftOptions,
     Role,
 )
-from mapapi.swarm.raft_wire import node_id, rows, state_of
+from mapapi.swarm.raft_wire import node_id, state_of
 
 log = logging.getLogger(__name__)
 
@@ -141,11 +142,7 @@ class RaftGroups:
         config = Config(frozenset(node_id(p) for p in voters))
         boot = PersistentState.bootstrap(config)
         self._open(chunk, boot, applied=1)
-        self.store.raft_save(chunk, hard=(1, NONE, 1), entries=rows(boot.entries))
-        # The chunk's clock starts at its newest commit (a history from before the group).
-        self.store.raft_applied(
-            chunk, 1, max((c.time for c in self.store.chunk_commits(chunk)), default=0)
-        )
+        persist_founding(self.store, chunk, boot)
         if self.states is not None and self.states.knows(chunk):
             # The log starts from a snapshot of the chunk (its table, and any history
             # from before the group), which every member that joins receives.
@@ -158,15 +155,13 @@ class RaftGroups:
     def resume(self, chunk: ChunkId) -> bool:
         """Reopen the chunk's group from the store after a restart; False if this
         peer persisted none (it joins the group empty with `join`)."""
-        kept = self.store.raft_load(chunk)
-        if kept is None:
+        if (kept := self.store.raft_load(chunk)) is None:
             return False
         self._open(chunk, state_of(kept), applied=kept.applied)
         return True
 
     def join(self, chunk: ChunkId) -> None:
-        """Take part in an existing group as a new, empty member: the leader sends
-        it the log (after a member proposed it with `propose_conf_change`)."""
+        """Take part in a group as a new, empty member (the leader sends the log)."""
         self.store.raft_save(chunk, hard=(0, NONE, 0))
         self._open(chunk, PersistentState(), applied=0)
 
@@ -205,6 +200,14 @@ class RaftGroups:
         with the log, as this peer knows it leading the group (none otherwise)."""
         return self._group(chunk).node.caught_up_learners()
 
+    def member_back(self, peer: PeerId) -> None:
+        """`peer` (re)joined: wake its groups, and report their members again."""
+        for group in [g for g in self._groups.values() if node_id(peer) in g.node.config.members]:
+            group.node.wake()  # it knows no leader until one heartbeats
+            group.members = frozenset()  # it can be named now
+            if self.applier.idle(group.chunk):
+                self._members_changed(group)
+
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
         return 0 if (kept := self.store.raft_load(chunk)) is None else kept.applied
@@ -236,8 +239,7 @@ class RaftGroups:
         change: ConfChange,
         timeout: float = PROPOSE_TIMEOUT,  # noqa: ASYNC109
     ) -> Applied:
-        """Append one single-server membership change (this peer must lead) and
-        wait until it applies here (`swarm/group_members.py` drives them).
+        """Append a single-server membership change (as leader); wait until it applies.
 
         Raises:
             NotChunkLeader: another peer leads, or none does yet.
@@ -250,15 +252,13 @@ class RaftGroups:
         return await self._await_entry(group, start, timeout)
 
     async def progressed(self, chunk: ChunkId) -> None:
-        """Until something next happens in the chunk's group here (entries applied,
-        a member's messages stepped); callers check again what they wait for."""
+        """Until something next happens in the chunk's group here (callers re-check)."""
         group = self._group(chunk)
         group.progress.clear()
         await group.progress.wait()
 
     def drop(self, chunk: ChunkId) -> None:
-        """Forget the chunk's group here (this peer left it): its node, its waiters
-        (they fail) and its persisted state."""
+        """Forget the chunk's group here (left): its node, waiters and persisted state."""
         group = self._groups.pop(chunk, None)
         self.applier.forget(chunk)
         if group is not None:

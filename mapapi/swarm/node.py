@@ -120,12 +120,13 @@ class Swarm:
             address=self.members.address,
             apply=applier(store),  # from any thread: big entries apply in a worker
             on_applied=self._applied,
-            peers=lambda: [m.id for m in self.members.all()],
+            peers=lambda: [m.id for m in (*self.members.all(), *self.members.departed())],
             states=StoreStates(store),
             on_members=store.set_holders,
             # idle groups go quiet while the failure detector hears their leaders
             alive=lambda peer: self.liveness.answers(peer),
         )
+        self.members.on_added = self.groups.member_back  # (re)started: groups catch it up
         self.liveness = Liveness(self.rpc, self.members, store, liveness)
         self.log = LogCommits(
             self.groups,

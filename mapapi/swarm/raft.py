@@ -130,6 +130,14 @@ class RaftNode(Leader):
             self._election_elapsed = 0
             self._campaign(pre=self.options.pre_vote)
 
+    def wake(self) -> None:
+        """Leave quiet: a leader heartbeats again (a member that restarted lost who
+        leads; it learns it from the next heartbeat), a follower's timer runs."""
+        if self.role is Role.LEADER:
+            self._wake()
+        else:
+            self.quiet = False
+
     def campaign(self) -> None:
         """Start an election now (as if the election timer fired), if this node is a voter."""
         if self.role is not Role.LEADER and self._promotable():

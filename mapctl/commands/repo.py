@@ -197,8 +197,18 @@ def chunk_list(
     info = session.call("chunk_list", table=table_name, peer=address)
     if as_json:
         render.emit_json(info)
-    else:
+    elif address is not None:
         render.records("chunks", info["chunks"], ["id", "table", "items"])
+    else:  # each holder by short id, with its role in the chunk's group when known
+        rows = [
+            {**row, "holders": ", ".join(_holder(h, row["roles"].get(h)) for h in row["holders"])}
+            for row in info["chunks"]
+        ]
+        render.records("chunks", rows, ["id", "table", "items", "holders"])
+
+
+def _holder(peer: str, role: str | None) -> str:
+    return peer[:8] if role is None else f"{peer[:8]} ({role})"
 
 
 @click.command("fsck")

@@ -176,6 +176,10 @@ class TestMembers:
         leader = await leader_among(peers, chunk)
         config = net(leader).groups.config(chunk)
         (learner,) = [p for p in peers if node_id(p.id) in config.learners]
+        roles = leader.roles(chunk)  # what `chunk list` shows
+        assert roles[leader.id] == "leader"
+        assert roles[learner.id] == "learner"
+        assert sorted(roles.values()) == ["leader", "learner", "voter", "voter"]
         dead = next(p for p in peers if p not in (leader, learner))
         await crash(dead)
         living = [p for p in peers if p is not dead]

@@ -46,10 +46,15 @@ class TestMembers:
     async def test_a_peer_that_closes_says_bye(self, swarm: MakeSwarm) -> None:
         peers = await swarm(4)
         leaving = peers.pop(1)
+        leaving_address = leaving.address
         await leaving.close()
         for peer in peers:
             assert leaving.id not in {s.member.id for s in peer.members()}
             assert {s.member.id for s in peer.members()} == {p.id for p in peers} - {peer.id}
+            # still a member of its chunks' groups: named, reached and remembered
+            members = net(peer).members
+            assert [m.id for m in members.departed()] == [leaving.id]
+            assert members.address(leaving.id) == leaving_address
 
     async def test_a_hello_in_someone_elses_name_is_refused(self, swarm: MakeSwarm) -> None:
         a, b = await swarm(2)
