@@ -230,8 +230,7 @@ async def list_missions(peer: Peer) -> list[MissionInfo]:
     point blocks held here (the mission row's box when none is held)."""
     if MISSIONS not in peer.store.tables():
         return []
-    async with reading(peer) as tx:
-        rows = await peer.scan(tx.begin_time, MISSIONS, None)
+    rows = await peer.scan_newest(MISSIONS)  # each mission as of its newest commit
     return await peer.off_loop(_missions_of, peer, rows)
 
 

@@ -366,6 +366,11 @@ class Peer:
         fetched first (`mapapi.swarm.reading.scan`)."""
         return await reading.scan(self.store, self.swarm, time, table, chunk)
 
+    async def scan_newest(self, table: str) -> list[Revision]:
+        """Every item of `table`, each chunk read at its own caught-up clock (a
+        listing: `mapapi.swarm.reading.scan_newest`)."""
+        return await reading.scan_newest(self.store, self.swarm, table)
+
     async def catch_up(
         self,
         time: int,
@@ -395,12 +400,11 @@ class Peer:
     async def labelled_readable(
         self, labels: Labels, names: Sequence[str], tables: Sequence[str], time: int
     ) -> int:
-        """A time at or after `time` at which `scan_labelled_now` reads the rows
-        of `tables` labelled with `names` as every replica will from now on
-        (`mapapi.swarm.reading.labelled_readable`)."""
-        moved = await reading.labelled_readable(self.store, self.swarm, labels, names, tables, time)
-        self.clock.advance_to(moved)
-        return moved
+        """A time at which `scan_labelled_now` reads the rows of `tables` labelled
+        with `names` as every replica will from now on, seeing every commit
+        acknowledged to them (`mapapi.swarm.reading.labelled_readable`); alone,
+        `time`."""
+        return await reading.labelled_readable(self.store, self.swarm, labels, names, tables, time)
 
     def scan_labelled_now(
         self, time: int, labels: Labels, label: str, table: str

@@ -229,10 +229,13 @@ class ReplicaStore(Store, Protocol):
         hard: tuple[int, int, int] | None = None,
         entries: Sequence[LogRow] = (),
         snapshot: tuple[int, int, bytes, bytes] | None = None,
+        compacted: bool = False,
     ) -> None:
         """Persist a snapshot (it replaces the whole stored log), then entries
         (replacing the log from the first one's index on), then the hard state
-        (term, vote, commit), atomically."""
+        (term, vote, commit), atomically. A `compacted` snapshot (this replica's
+        own, at an applied index) replaces only the entries up to its index, and
+        only if newer than the stored one."""
 
     def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
         """Record the applied index and the newest commit time it brought; inside
@@ -241,6 +244,10 @@ class ReplicaStore(Store, Protocol):
         Raises:
             ValueError: the index goes backwards.
         """
+
+    def raft_applied_index(self, chunk_id: ChunkId) -> int | None:
+        """The chunk's applied log index, or None if it has no Raft group: cheap
+        (`raft_load` reads the whole log)."""
 
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log (0 if none)."""

@@ -293,11 +293,23 @@ class MemoryStore(MemoryChains):
         hard: tuple[int, int, int] | None = None,
         entries: Sequence[LogRow] = (),
         snapshot: tuple[int, int, bytes, bytes] | None = None,
+        compacted: bool = False,
     ) -> None:
         """Keep a snapshot, then entries, then the hard state (as `raft_sql.save`)."""
         with self._lock:
             kept = self._raft.get(chunk_id) or RaftRecord(0, 0, 0, 0, 0, 0, b"", b"", (), 0)
-            if snapshot is not None:
+            if snapshot is not None and compacted:
+                index, term, config, data = snapshot
+                if kept.snap_index < index:
+                    kept = replace(
+                        kept,
+                        snap_index=index,
+                        snap_term=term,
+                        snap_config=config,
+                        snap_data=data,
+                        entries=tuple(e for e in kept.entries if e.index > index),
+                    )
+            elif snapshot is not None:
                 index, term, config, data = snapshot
                 kept = replace(
                     kept,
@@ -336,6 +348,12 @@ class MemoryStore(MemoryChains):
     def integrity(self) -> list[str]:
         """Nothing to check in memory."""
         return []
+
+    def raft_applied_index(self, chunk_id: ChunkId) -> int | None:
+        """The chunk's applied log index, or None without a Raft group."""
+        with self._lock:
+            kept = self._raft.get(chunk_id)
+            return None if kept is None else kept.applied
 
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""

@@ -79,6 +79,7 @@ def save(
     hard: tuple[int, int, int] | None = None,
     entries: Sequence[LogRow] = (),
     snapshot: tuple[int, int, bytes, bytes] | None = None,
+    compacted: bool = False,
 ) -> None:
     """Persist one `Ready`'s worth of state, in the Ready order contract's order:
     the snapshot (it replaces the whole stored log), then the entries (the first
@@ -87,9 +88,21 @@ def save(
     Args:
         hard: (term, vote, commit index).
         snapshot: (index, term, config bytes, data bytes).
+        compacted: the snapshot is this replica's own state at an applied index
+            (compaction): it replaces only the entries up to it, and only if it is
+            newer than the stored one (a leader's may have arrived meanwhile).
     """
     con.execute("INSERT OR IGNORE INTO raft_state (chunk_id) VALUES (?)", (chunk,))
-    if snapshot is not None:
+    if snapshot is not None and compacted:
+        index, term, config, data = snapshot
+        updated = con.execute(
+            "UPDATE raft_state SET snap_index = ?, snap_term = ?, snap_config = ?, snap_data = ? "
+            "WHERE chunk_id = ? AND snap_index < ?",
+            (index, term, config, data, chunk, index),
+        )
+        if updated.rowcount:
+            con.execute("DELETE FROM raft_log WHERE chunk_id = ? AND idx <= ?", (chunk, index))
+    elif snapshot is not None:
         index, term, config, data = snapshot
         con.execute(
             "UPDATE raft_state SET snap_index = ?, snap_term = ?, snap_config = ?, snap_data = ?, "
@@ -130,6 +143,12 @@ def set_applied(con: sqlite3.Connection, chunk: str, index: int, time: int = 0) 
         "UPDATE raft_state SET applied = ?, time = MAX(time, ?) WHERE chunk_id = ?",
         (index, time, chunk),
     )
+
+
+def applied_index(con: sqlite3.Connection, chunk: str) -> int | None:
+    """`chunk`'s applied log index, or None if it has no Raft state."""
+    row = con.execute("SELECT applied FROM raft_state WHERE chunk_id = ?", (chunk,)).fetchone()
+    return None if row is None else int(row[0])
 
 
 def chunk_time(con: sqlite3.Connection, chunk: str) -> int:

@@ -1,24 +1,24 @@
 """The default `Store`: one SQLite file in WAL mode, one SQL transaction per commit.
 
-Several threads and several processes may open the same file. Each thread
-gets its own connection; committers serialise on SQLite's write lock
-(`BEGIN IMMEDIATE`), which makes validation plus apply atomic across processes.
-WAL with `synchronous=NORMAL` survives a killed process with every acknowledged
-commit intact; only an OS crash or power loss may drop the last few commits.
-"""
+Several threads and processes may open the file, each thread with its own
+connection; committers serialise on SQLite's write lock (`BEGIN IMMEDIATE`),
+which makes validation plus apply atomic across processes. WAL with
+`synchronous=NORMAL` keeps every acknowledged commit through a killed process;
+an OS crash or power loss may drop the last few."""
 
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import chain_sql, raft_sql, sqlite_replica, sqlite_rows, sqlite_schema
-from mapapi.store.base import ChunkInfo, IdKind, LogRow, RaftRecord, TxRow
+from mapapi.store.base import ChunkInfo, IdKind, RaftRecord, TxRow
 from mapapi.store.file_check import check_file, storage_error
 from mapapi.store.mark import HighWater
 from mapapi.store.sqlite_chain import SqliteChains
@@ -193,8 +193,7 @@ class SqliteStore(SqliteChains):
         return [self._revision(row) for row in self._con().execute(sql, [time, *args])]
 
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
-        """Write the record and its revisions, and link the commit into the chain of
-        each chunk whose part of it is new here, in one SQL transaction."""
+        """Write the record, its revisions and its chain links, in one transaction."""
         con = self._con()
         with self._write(con):
             self.mark.before_write(con)
@@ -338,29 +337,23 @@ class SqliteStore(SqliteChains):
         """The persisted state of the chunk's Raft group, or None."""
         return raft_sql.load(self._con(), chunk_id)
 
-    def raft_save(
-        self,
-        chunk_id: ChunkId,
-        *,
-        hard: tuple[int, int, int] | None = None,
-        entries: Sequence[LogRow] = (),
-        snapshot: tuple[int, int, bytes, bytes] | None = None,
-    ) -> None:
-        """Persist one Ready's snapshot, entries and hard state in one transaction."""
-        con = self._con()
-        with self._write(con):
-            raft_sql.save(con, chunk_id, hard=hard, entries=entries, snapshot=snapshot)
+    def raft_save(self, chunk_id: ChunkId, **parts: Any) -> None:
+        """Persist one Ready's snapshot, entries and hard state in one transaction
+        (the keywords of `Store.raft_save`)."""
+        self._in_write(raft_sql.save, chunk_id, **parts)
 
     def raft_applied(self, chunk_id: ChunkId, index: int, time: int = 0) -> None:
         """Record the applied index and time (joins the caller's `exclusive()`)."""
-        con = self._con()
-        with self._write(con):
-            raft_sql.set_applied(con, chunk_id, index, time)
+        self._in_write(raft_sql.set_applied, chunk_id, index, time)
+
+    def raft_applied_index(self, chunk_id: ChunkId) -> int | None:
+        """The chunk's applied log index; None if it has no group (reads no log)."""
+        return raft_sql.applied_index(self._con(), chunk_id)
 
     def integrity(self) -> list[str]:
         """SQLite's own check of the file (`PRAGMA quick_check`); empty when sound."""
-        rows = [str(r[0]) for r in self._con().execute("PRAGMA quick_check")]
-        return [] if rows == ["ok"] else [f"{self.path}: {r}" for r in rows]
+        rows = [str(r[0]) for r in self._con().execute("PRAGMA quick_check") if r[0] != "ok"]
+        return [f"{self.path}: {r}" for r in rows]
 
     def raft_time(self, chunk_id: ChunkId) -> int:
         """The newest commit time applied from the chunk's log."""
@@ -372,9 +365,7 @@ class SqliteStore(SqliteChains):
 
     def raft_tx_put(self, chunk_id: ChunkId, commit_id: CommitId, row: TxRow) -> None:
         """Record what the chunk's log did with a transaction (joins `exclusive()`)."""
-        con = self._con()
-        with self._write(con):
-            raft_sql.tx_put(con, chunk_id, commit_id, row)
+        self._in_write(raft_sql.tx_put, chunk_id, commit_id, row)
 
     def raft_tx_prepared(self, chunk_id: ChunkId) -> list[tuple[CommitId, TxRow]]:
         """The transactions prepared on the chunk and not decided there yet."""
@@ -386,9 +377,13 @@ class SqliteStore(SqliteChains):
 
     def raft_drop(self, chunk_id: ChunkId) -> None:
         """Forget the chunk's group state."""
+        self._in_write(raft_sql.drop, chunk_id)
+
+    def _in_write(self, fn: Callable[..., None], *args: Any, **kwargs: Any) -> None:
+        """`fn(connection, *args, **kwargs)` in a write (joining `exclusive()`)."""
         con = self._con()
         with self._write(con):
-            raft_sql.drop(con, chunk_id)
+            fn(con, *args, **kwargs)
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
         """Forget a chunk's replica (this peer left it); commit records stay, and so

@@ -12,13 +12,13 @@ its chain (`refuse_to_hand_on`).
 
 from __future__ import annotations
 
-import asyncio
 import logging
 
 from mapapi.core import chain
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.store.base import ReplicaStore
+from mapapi.store.offload import off_loop
 
 log = logging.getLogger(__name__)
 
@@ -33,17 +33,7 @@ async def refuse_to_hand_on(store: ReplicaStore, chunk: ChunkId, me: PeerId) -> 
     Raises:
         CorruptRepoError: it does not (logged here; the newcomer asks another holder).
     """
-    # Read in this order, the history holds at least the chained commits: commits
-    # applied meanwhile (in a worker thread, or while the chain is rebuilt) only
-    # add links past them, so the chain must be a prefix of the one rebuilt.
-    links = store.chain_links(chunk)
-    revisions = store.chunk_revisions(chunk)
-    commits = {c.id: c for c in store.chunk_commits(chunk)}
-    try:
-        rebuilt = await asyncio.to_thread(chain.rebuild, chunk, commits, revisions)
-    except KeyError:  # a revision whose commit record is gone
-        rebuilt = None
-    if rebuilt is not None and rebuilt[: len(links)] == links:
+    if await off_loop(store, _chain_holds, store, chunk):
         return
     problem = (
         f"chunk {chunk.short}: the history of this replica no longer matches its hash "
@@ -51,6 +41,20 @@ async def refuse_to_hand_on(store: ReplicaStore, chunk: ChunkId, me: PeerId) -> 
     )
     log.error("%s", problem)
     raise CorruptRepoError(problem)
+
+
+def _chain_holds(store: ReplicaStore, chunk: ChunkId) -> bool:
+    """Whether the chunk's chain is a prefix of the one its history rebuilds (any
+    thread). Read in this order, the history holds at least the chained commits:
+    commits applied meanwhile only add links past them."""
+    links = store.chain_links(chunk)
+    revisions = store.chunk_revisions(chunk)
+    commits = {c.id: c for c in store.chunk_commits(chunk)}
+    try:
+        rebuilt = chain.rebuild(chunk, commits, revisions)
+    except KeyError:  # a revision whose commit record is gone
+        return False
+    return rebuilt[: len(links)] == links
 
 
 def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:

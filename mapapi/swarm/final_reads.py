@@ -29,7 +29,7 @@ class FinalReads:
         self._final: dict[ChunkId, int] = {}  # chunk -> the time up to which reads are final
 
     def _holds(self, chunk: ChunkId) -> bool:
-        return self.store.raft_load(chunk) is not None
+        return self.store.raft_applied_index(chunk) is not None
 
     async def read_at(self, chunk: ChunkId, time: int) -> None:
         """Make this replica of `chunk` final up to `time` before a view reads it

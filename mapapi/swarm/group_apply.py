@@ -36,7 +36,13 @@ from mapapi.core.ids import ChunkId
 from mapapi.store.base import ReplicaStore
 from mapapi.store.offload import off_loop
 from mapapi.swarm.chunk_state import StoreStates
-from mapapi.swarm.group_state import Applied, ApplyFn, GroupState, compact
+from mapapi.swarm.group_state import (
+    Applied,
+    ApplyFn,
+    GroupState,
+    persist_compaction,
+    snapshot_at,
+)
 from mapapi.swarm.raft_types import Entry, EntryKind
 
 log = logging.getLogger(__name__)
@@ -58,15 +64,15 @@ class Work:
     entries: tuple[Entry, ...] = ()
     snapshot: tuple[bytes, int] | None = None  # (data, index)
     compact_at: int = 0
+    compact_head: tuple[int, bytes] = (0, b"")  # (term, configuration) at compact_at
 
     @property
     def size(self) -> int:
-        """The bytes this work decodes (a compaction always counts as big)."""
-        if self.compact_at:
+        """The bytes this work decodes (a compaction or a snapshot, which rebuilds
+        the chunk's chain and label index, always counts as big)."""
+        if self.compact_at or self.snapshot is not None:
             return HEAVY_BYTES
-        return sum(len(e.data) for e in self.entries) + len(
-            self.snapshot[0] if self.snapshot else b""
-        )
+        return sum(len(e.data) for e in self.entries)
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,7 +149,8 @@ class GroupApplier:
         before it is written; ignored while a compaction is queued."""
         queue = self._queues.get(group.chunk, ())
         if self._states is not None and not any(w.compact_at for w in queue):
-            self._add(group, Work(compact_at=index))
+            _, term, config, _ = snapshot_at(group, index, b"")
+            self._add(group, Work(compact_at=index, compact_head=(term, config)))
 
     def forget(self, chunk: ChunkId) -> None:
         """Drop the chunk's queue (its group is gone); a write under way in a
@@ -189,9 +196,11 @@ class GroupApplier:
 
     def _write(self, chunk: ChunkId, work: Work) -> Done:
         """The store's part of `work` (any thread)."""
-        if work.compact_at:
+        if work.compact_at:  # the state taken, and persisted, here
             assert self._states is not None
-            return Done({}, self._states.take(chunk))
+            data = self._states.take(chunk)
+            persist_compaction(self._store, chunk, (work.compact_at, *work.compact_head, data))
+            return Done({}, data)
         if work.snapshot is not None:
             if self._states is None:
                 log.error("chunk %s: a snapshot arrived, and this peer cannot install one", chunk)
@@ -202,7 +211,9 @@ class GroupApplier:
     def _finish(self, group: GroupState, work: Work, done: Done) -> None:
         """The loop's part of `work`, once written: answer and tell."""
         if work.compact_at:
-            compact(self._store, group, done.state, work.compact_at)
+            if group.node.log.snapshot.index < work.compact_at:  # no leader's came since
+                group.node.compact(work.compact_at, done.state)
+            group.progress.set()  # a joiner waiting for the founding snapshot goes on
             return
         group.progress.set()
         group.settle(work.entries, done.results)

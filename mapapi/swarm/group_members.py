@@ -162,7 +162,7 @@ class GroupMembers:
                 (it hands it on to no one; this peer is not taken in).
             NetworkError: `via` could not be reached.
         """
-        joined = self.groups.store.raft_load(chunk) is None
+        joined = self.groups.store.raft_applied_index(chunk) is None
         if joined:
             self.groups.join(chunk)
         try:
@@ -231,6 +231,8 @@ class GroupMembers:
         if not groups.is_leader(chunk):
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
         if add is not None and add not in groups.members(chunk):
+            while not groups.applier.idle(chunk):  # a founding snapshot is being taken
+                await groups.progressed(chunk)
             await refuse_to_hand_on(groups.store, chunk, groups.me)
             # A joiner must be reachable where the swarm knows it: a stranger (or an
             # address that does not answer) taken in as a voter would cost the quorum.

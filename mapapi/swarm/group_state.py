@@ -130,17 +130,22 @@ def persist_founding(store: ReplicaStore, chunk: ChunkId, boot: PersistentState)
     store.raft_applied(chunk, 1, newest)
 
 
-def compact(store: ReplicaStore, group: GroupState, data: bytes, index: int) -> None:
-    """Compact the group's log up to `index` (applied) into a snapshot of `data` (the
-    chunk's state there), persisted with the entries after it."""
-    snap = group.node.compact(index, data)
-    kept = store.raft_load(group.chunk)
-    after = [] if kept is None else [e for e in kept.entries if e.index > snap.index]
-    store.raft_save(
-        group.chunk,
-        snapshot=(snap.index, snap.term, snap.config.encode(), snap.data),
-        entries=after,
-    )
+def snapshot_at(group: GroupState, index: int, data: bytes) -> tuple[int, int, bytes, bytes]:
+    """The stored form of a snapshot of `data` at an applied `index` of the group's
+    log: (index, term, configuration then, data)."""
+    log = group.node.log
+    term = log.term(index)
+    if term is None:
+        raise ValueError(f"cannot compact chunk {group.chunk.short} to {index}: not in its log")
+    return index, term, log.config_at(index).encode(), data
+
+
+def persist_compaction(
+    store: ReplicaStore, chunk: ChunkId, snap: tuple[int, int, bytes, bytes]
+) -> None:
+    """Store a snapshot of this replica's own state: it replaces the entries up to
+    its index, if newer than the stored snapshot (any thread)."""
+    store.raft_save(chunk, snapshot=snap, compacted=True)
 
 
 def step_batch(

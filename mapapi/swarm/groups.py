@@ -36,7 +36,6 @@ from mapapi.swarm.group_state import (
     Applied,
     ApplyFn,
     GroupState,
-    compact,
     halted,
     not_committed,
     persist,
@@ -137,7 +136,7 @@ class RaftGroups:
         Raises:
             ValueError: this peer already has the chunk's group.
         """
-        if chunk in self._groups or self.store.raft_load(chunk) is not None:
+        if chunk in self._groups or self.store.raft_applied_index(chunk) is not None:
             raise ValueError(f"chunk {chunk} already has a Raft group here")
         config = Config(frozenset(node_id(p) for p in voters))
         boot = PersistentState.bootstrap(config)
@@ -145,8 +144,9 @@ class RaftGroups:
         persist_founding(self.store, chunk, boot)
         if self.states is not None and self.states.knows(chunk):
             # The log starts from a snapshot of the chunk (its table, and any history
-            # from before the group), which every member that joins receives.
-            compact(self.store, self._groups[chunk], self.states.take(chunk), 1)
+            # from before the group) that every joiner receives: taken in a worker
+            # (`GroupMembers` takes no one in before: `applier.idle`).
+            self.applier.compact(self._groups[chunk], 1)
         if config.voters == {node_id(self.me)}:
             self._groups[chunk].node.campaign()
             self._process(self._groups[chunk])
@@ -210,7 +210,7 @@ class RaftGroups:
 
     def applied(self, chunk: ChunkId) -> int:
         """The last log index applied to this peer's store."""
-        return 0 if (kept := self.store.raft_load(chunk)) is None else kept.applied
+        return self.store.raft_applied_index(chunk) or 0
 
     async def propose(
         self,

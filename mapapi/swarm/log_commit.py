@@ -164,7 +164,7 @@ class LogCommits:
                     chunks.add(read)
             for table, scope in tx.scopes:
                 chunks |= {scope} if scope is not None else {c.id for c in store.chunks(table)}
-            chunks = {c for c in chunks if store.raft_load(c) is not None}  # held here
+            chunks = {c for c in chunks if store.raft_applied_index(c) is not None}  # held here
             chunks |= {c.chunk_id for c in tx.changes}
         return tuple(sorted(chunks))
 
@@ -185,7 +185,7 @@ class LogCommits:
         try:
             async with asyncio.timeout(PROPOSE_TIMEOUT):
                 for chunk in record.chunks:
-                    held = store.raft_load(chunk) is not None
+                    held = store.raft_applied_index(chunk) is not None
                     while held and store.raft_time(chunk) < record.time:
                         await self.groups.progressed(chunk)
         except TimeoutError:

@@ -49,6 +49,21 @@ async def scan(
     return await off_loop(store, store.scan, time, table=table, chunk=chunk)
 
 
+async def scan_newest(store: ReplicaStore, swarm: Swarm | None, table: str) -> list[Revision]:
+    """Every item of `table` as each of its chunks holds it once caught up with
+    its leader, read at that chunk's clock: every commit acknowledged to it is
+    seen, and no chunk is closed with a `TimeFloor` (a write to its log), but
+    the chunks are not read at one time (a listing, not a snapshot). Alone, the
+    items now."""
+    if swarm is None:
+        return await off_loop(store, store.scan, store.clock(), table=table)
+    found: list[Revision] = []
+    for chunk in store.chunk_ids(table):
+        time = await swarm.reads.caught_up(chunk)
+        found += await off_loop(store, store.scan, time, table=table, chunk=chunk)
+    return found
+
+
 async def latest(
     store: ReplicaStore,
     swarm: Swarm | None,
@@ -131,15 +146,23 @@ async def labelled_readable(
     tables: Sequence[str],
     time: int,
 ) -> int:
-    """A time at or after `time` at which the rows of `tables` labelled with any
-    of `names` read the same from now on, on every replica: their chunks are
-    caught up with their leaders (the time moves to the newest of their clocks,
-    as a fresh view's does: `latest`) and made final up to it. Then
-    `scan_labelled_now` reads them at that time from any thread. Alone, `time`."""
+    """A time at which the rows of `tables` labelled with any of `names` read the
+    same from now on, on every replica, and show every commit acknowledged to
+    them before: their chunks are caught up with their leaders, and the time is
+    the newest of their clocks, up to which they are made final. Then
+    `scan_labelled_now` reads them at that time from any thread. Alone, or
+    without such rows, `time`.
+
+    Not a later time, such as a view's begin time: a chunk whose clock is
+    behind the read time is closed with a `TimeFloor` entry, a write to its log
+    for a read; the newest clock closes no chunk of a mission imported in one
+    transaction (they share its time)."""
     if swarm is None:
         return time
     chunks = _label_chunks(store, labels, names, tables)
-    time = await _caught_up(swarm, chunks, time)
+    if not chunks:
+        return time
+    time = await _caught_up(swarm, chunks, 0)
     for chunk in chunks:
         await swarm.reads.read_at(chunk, time)
     return time

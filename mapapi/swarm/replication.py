@@ -103,7 +103,7 @@ class Replicator:
 
     def holds(self, chunk: ChunkId) -> bool:
         """Whether this peer is a member of the chunk's group."""
-        return self.store.raft_load(chunk) is not None
+        return self.store.raft_applied_index(chunk) is not None
 
     # -- participation -------------------------------------------------------------------
     async def participate(
