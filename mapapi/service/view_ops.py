@@ -101,12 +101,15 @@ class ViewOperations:
     ) -> Json:
         """Stage an insert (no item) or an update."""
         item_id = ItemId(resolve_id(self.peer, "item", item)) if item else None
+        if item_id is not None:
+            await self.views.pin(view, item_id)
         staged = self.views.stage_set(view, table, data, item_id, chunk_arg(self.peer, chunk))
         return {"id": staged, "op": "update" if item_id else "insert"}
 
     async def rm(self, view: str, table: str, item: str) -> Json:
         """Stage a removal."""
         item_id = ItemId(resolve_id(self.peer, "item", item))
+        await self.views.pin(view, item_id)
         self.views.stage_remove(view, table, item_id)
         return {"id": item_id, "op": "remove"}
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from mapapi.core import chain
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, CommitId, PeerId
 from mapapi.store import raft_sql, sqlite_replica
 from mapapi.store.base import Divergence
 
@@ -82,7 +82,14 @@ def extend(
 def rebuild(con: sqlite3.Connection, path: Path, chunk: ChunkId) -> None:
     """Make the chunk's chain anew from its stored history (`chain.rebuild`)."""
     records = {c.id: c for c in sqlite_replica.chunk_commits(path, con, chunk)}
-    links = chain.rebuild(chunk, records, sqlite_replica.chunk_revisions(path, con, chunk))
+    replace(
+        con, chunk, chain.rebuild(chunk, records, sqlite_replica.chunk_revisions(path, con, chunk))
+    )
+
+
+def replace(con: sqlite3.Connection, chunk: ChunkId, links: list[tuple[CommitId, bytes]]) -> None:
+    """Make `links` the chunk's whole chain (rebuilt by the caller, say before a
+    write transaction, from the history it installs)."""
     con.execute("DELETE FROM raft_chain WHERE chunk_id = ?", (chunk,))
     con.executemany(
         "INSERT INTO raft_chain (chunk_id, seq, commit_id, link) VALUES (?, ?, ?, ?)",

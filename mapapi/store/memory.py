@@ -298,27 +298,19 @@ class MemoryStore(MemoryChains):
         """Keep a snapshot, then entries, then the hard state (as `raft_sql.save`)."""
         with self._lock:
             kept = self._raft.get(chunk_id) or RaftRecord(0, 0, 0, 0, 0, 0, b"", b"", (), 0)
-            if snapshot is not None and compacted:
+            if snapshot is not None and (not compacted or kept.snap_index < snapshot[0]):
                 index, term, config, data = snapshot
-                if kept.snap_index < index:
-                    kept = replace(
-                        kept,
-                        snap_index=index,
-                        snap_term=term,
-                        snap_config=config,
-                        snap_data=data,
-                        entries=tuple(e for e in kept.entries if e.index > index),
-                    )
-            elif snapshot is not None:
-                index, term, config, data = snapshot
+                # our own snapshot keeps the entries after it; a leader's replaces the log
+                after = tuple(e for e in kept.entries if e.index > index) if compacted else ()
+                commit = kept.commit if compacted else max(kept.commit, index)
                 kept = replace(
                     kept,
                     snap_index=index,
                     snap_term=term,
                     snap_config=config,
                     snap_data=data,
-                    commit=max(kept.commit, index),
-                    entries=(),  # a leader's snapshot replaces the whole log
+                    commit=commit,
+                    entries=after,
                 )
             if entries:
                 first = entries[0].index

@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from mapapi.core import chain
 from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
@@ -315,19 +316,24 @@ class SqliteStore(SqliteChains):
     ) -> None:
         """Take in a replica received from a holder, atomically (all or nothing).
 
-        The replica replaces what this store had of the chunk: a revision the
-        holder lacks (a commit the swarm never decided, applied here alone
-        before a crash) goes, and so does the record of a commit left with no
-        revision at all.
+        It replaces what this store had of the chunk: a revision the holder lacks
+        goes, and so does the record of a commit left with no revision at all.
 
         Raises:
             UsageError: this repository has a table of that name with another type.
         """
+        try:  # hashed before the write lock is taken: installs hold it long enough
+            links = chain.rebuild(chunk_id, {c.id: c for c in commits}, revisions)
+        except KeyError:  # a revision of a commit recorded only here: from the store
+            links = None
         con = self._con()
         with self._write(con):
             self.mark.before_write(con)
             sqlite_replica.install(con, chunk_id, table, type_name, revisions, commits, holders)
-            chain_sql.rebuild(con, self.path, chunk_id)
+            if links is None:
+                chain_sql.rebuild(con, self.path, chunk_id)
+            else:
+                chain_sql.replace(con, chunk_id, links)
             chain_sql.forget(con, chunk_id)
             if commits:
                 newest = max(commits, key=lambda c: (c.time, c.id))
