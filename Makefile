@@ -36,7 +36,7 @@ $(TEST_STAMP): pyproject.toml | $(PY)
 install: $(TEST_STAMP)
 
 test: $(TEST_STAMP)
-	@echo "==> running the whole test suite: about 11 minutes on 2 cores (make check: the quick part, about a minute and a half)"
+	@echo "==> running the whole test suite: about 13 minutes on 2 cores (make check: the quick part, about a minute and a half)"
 	$(PY) -m pytest --durations=10
 
 check: $(TEST_STAMP)

@@ -366,6 +366,11 @@ class Peer:
         fetched first (`mapapi.swarm.reading.scan`)."""
         return await reading.scan(self.store, self.swarm, time, table, chunk)
 
+    async def pin(self, item_id: ItemId, time: int) -> bool:
+        """Make the item's chunk final up to `time` before a blind write, best
+        effort (`mapapi.swarm.reading.pin`); whether it was."""
+        return await reading.pin(self.store, self.swarm, item_id, time)
+
     async def scan_newest(self, table: str) -> list[Revision]:
         """Every item of `table`, each chunk read at its own caught-up clock (a
         listing: `mapapi.swarm.reading.scan_newest`)."""

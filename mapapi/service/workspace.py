@@ -113,13 +113,13 @@ class Workspace:
 
     async def pin(self, name: str, item_id: ItemId) -> None:
         """Before view `name` writes an item it may not have read: make the item's
-        chunk final up to the view's time (in a swarm, `Peer.read` closes its log
-        there), so a commit to it from now on, on any peer, is stamped past the
-        view and found as its conflict. Without this a blind write would take a
-        commit made meanwhile on a peer with a slower Lamport clock as already
-        seen, and overwrite it."""
+        chunk final up to the view's time (in a swarm, `Peer.pin` closes its log
+        there, best effort), so a commit to it from now on, on any peer, is
+        stamped past the view and found as its conflict. Without this a blind
+        write would take a commit made meanwhile on a peer with a slower Lamport
+        clock as already seen, and overwrite it."""
         view = self.get(name)
-        await self.peer.read(item_id, self.peer.now() if view is None else view.begin_time)
+        await self.peer.pin(item_id, self.peer.now() if view is None else view.begin_time)
 
     def stage_set(
         self, name: str, table: str, data: str, item_id: ItemId | None, chunk: ChunkId | None

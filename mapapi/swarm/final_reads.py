@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from mapapi.core.ids import ChunkId
 from mapapi.store.base import ReplicaStore
+from mapapi.swarm.groups import PROPOSE_TIMEOUT
 from mapapi.swarm.log_commit import LogCommits
 
 
@@ -31,7 +32,7 @@ class FinalReads:
     def _holds(self, chunk: ChunkId) -> bool:
         return self.store.raft_applied_index(chunk) is not None
 
-    async def read_at(self, chunk: ChunkId, time: int) -> None:
+    async def read_at(self, chunk: ChunkId, time: int, timeout: float = PROPOSE_TIMEOUT) -> None:  # noqa: ASYNC109
         """Make this replica of `chunk` final up to `time` before a view reads it
         there (`LogCommits.read_at`: caught up with the leader, and no later commit
         stamped at or before `time`); once done for a time, later reads at or
@@ -43,7 +44,7 @@ class FinalReads:
         """
         if self._final.get(chunk, -1) >= time or not self._holds(chunk):
             return
-        await self.log.read_at(chunk, time)
+        await self.log.read_at(chunk, time, timeout)
         self._final[chunk] = max(self._final.get(chunk, -1), time)
 
     async def caught_up(self, chunk: ChunkId) -> int:

@@ -73,6 +73,8 @@ async def change_nodes(
     """`change_members` by node ids: the members wanted, whether this peer can name
     them (reach them) or not."""
     me = node_id(groups.me)
+    while not groups.applier.idle(chunk):  # a joiner gets the founding snapshot, once taken
+        await groups.progressed(chunk)
     loop = asyncio.get_running_loop()
     patience = loop.time() + CATCH_UP_WAIT
     try:
@@ -231,8 +233,6 @@ class GroupMembers:
         if not groups.is_leader(chunk):
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
         if add is not None and add not in groups.members(chunk):
-            while not groups.applier.idle(chunk):  # a founding snapshot is being taken
-                await groups.progressed(chunk)
             await refuse_to_hand_on(groups.store, chunk, groups.me)
             # A joiner must be reachable where the swarm knows it: a stranger (or an
             # address that does not answer) taken in as a voter would cost the quorum.

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from mapapi.core.errors import ChunkNotFound
+from mapapi.core.errors import ChunkNotFound, MapError
 from mapapi.store.labels import LabelledStore, summarise
 from mapapi.store.offload import off_loop
 
@@ -47,6 +47,32 @@ async def scan(
         for each in await _scope_chunks(store, swarm, table, chunk):
             await swarm.reads.read_at(each, time)
     return await off_loop(store, store.scan, time, table=table, chunk=chunk)
+
+
+PIN_TIMEOUT = 1.0
+"""Seconds a view's blind write waits to make its chunk final (`pin`)."""
+
+
+async def pin(store: ReplicaStore, swarm: Swarm | None, item_id: ItemId, time: int) -> bool:
+    """Make the chunk of an item held here final up to `time`, as a read at `time`
+    would (see `Workspace.pin`), waiting `PIN_TIMEOUT` at most; whether it was.
+    Best effort: an edit is staged even where the chunk's voters cannot be
+    reached now (a minority, a chunk held by a two-phase commit), as its commit
+    is refused there anyway, and a floor made later would come too late.
+
+    Raises:
+        MapError: a failure that is not the network's or the group's (not retriable).
+    """
+    chunk = store.item_chunk(item_id) if swarm is not None else None
+    if swarm is None or chunk is None:
+        return swarm is None
+    try:
+        await swarm.reads.read_at(chunk, time, PIN_TIMEOUT)
+    except MapError as exc:
+        if not exc.retriable:
+            raise
+        return False
+    return True
 
 
 async def scan_newest(store: ReplicaStore, swarm: Swarm | None, table: str) -> list[Revision]:
