@@ -21,9 +21,11 @@ holds the transaction's one decision, and the others follow it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 from mapapi.core import codec
+from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord
 from mapapi.core.ids import ChunkId, CommitId
 from mapapi.core.proposal import Proposal, TimeFloor, TxDecision
@@ -63,6 +65,29 @@ def applier(store: ReplicaStore) -> ApplyFn:
         return Applied(outcome, outcome.record.time if outcome.record else 0)
 
     return apply_entry
+
+
+SMALL_ENTRY = 1024
+"""Bytes under which an entry may be a decision (weighed by what it writes)."""
+
+
+def weight(store: ReplicaStore) -> Callable[[ChunkId, Entry], int]:
+    """What applying an entry costs (`GroupApplier.weigh`): its size, but for a
+    decision to commit, the size of the prepare it writes."""
+
+    def weigh(chunk: ChunkId, entry: Entry) -> int:
+        if len(entry.data) > SMALL_ENTRY:
+            return len(entry.data)
+        try:
+            carried = codec.decode_entry(entry.data)
+        except CorruptRepoError:
+            return len(entry.data)  # applying it says so
+        if isinstance(carried, TxDecision) and carried.commit:
+            kept = store.raft_tx(chunk, carried.commit_id)
+            return len(entry.data) + (0 if kept is None else len(kept.data))
+        return len(entry.data)
+
+    return weigh
 
 
 def apply_prepare(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome:

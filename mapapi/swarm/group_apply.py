@@ -66,14 +66,6 @@ class Work:
     compact_at: int = 0
     compact_head: tuple[int, bytes] = (0, b"")  # (term, configuration) at compact_at
 
-    @property
-    def size(self) -> int:
-        """The bytes this work decodes (a compaction or a snapshot, which rebuilds
-        the chunk's chain and label index, always counts as big)."""
-        if self.compact_at or self.snapshot is not None:
-            return HEAVY_BYTES
-        return sum(len(e.data) for e in self.entries)
-
 
 @dataclass(frozen=True, slots=True)
 class Done:
@@ -130,6 +122,9 @@ class GroupApplier:
         self._on_halt = on_halt
         self._on_drained = on_drained
         self._queues: dict[ChunkId, deque[Work]] = {}
+        # what an entry costs to apply, in bytes decoded: its size unless told
+        # better (a small decision writes every row its transaction prepared)
+        self.weigh: Callable[[ChunkId, Entry], int] = lambda chunk, entry: len(entry.data)
         self._tasks: dict[ChunkId, asyncio.Task[None]] = {}
 
     def idle(self, chunk: ChunkId) -> bool:
@@ -169,13 +164,20 @@ class GroupApplier:
 
     def _add(self, group: GroupState, work: Work) -> None:
         chunk = group.chunk
-        if self.idle(chunk) and work.size < HEAVY_BYTES:  # raises: the caller halts
+        if self.idle(chunk) and self._light(chunk, work):  # raises: the caller halts
             self._finish(group, work, self._write(chunk, work))
             return
         self._queues.setdefault(chunk, deque()).append(work)
         if chunk not in self._tasks:
             loop = asyncio.get_running_loop()
             self._tasks[chunk] = loop.create_task(self._drain(group), name=f"apply {chunk.short}")
+
+    def _light(self, chunk: ChunkId, work: Work) -> bool:
+        """Whether `work` is applied on the loop: entries that weigh little (a
+        compaction or a snapshot, which rebuilds a chunk's chain, never is)."""
+        if work.compact_at or work.snapshot is not None:
+            return False
+        return sum(self.weigh(chunk, e) for e in work.entries) < HEAVY_BYTES
 
     async def _drain(self, group: GroupState) -> None:
         """Write the group's queued work in a worker thread, one at a time, in order."""

@@ -37,7 +37,7 @@ from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.apply import Outcome
-from mapapi.swarm.apply_tx import applier
+from mapapi.swarm.apply_tx import applier, weight
 from mapapi.swarm.chain_watch import ChainWatch, shared
 from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.commit_check import CommitRule
@@ -105,8 +105,7 @@ class Swarm:
         self.grid = grid or SpatialGrid()
         self.places = places or ChunkPlaces(store)
         self.index: SpatialIndex | None = None  # made by `start()`, over the ring
-        self._name = name
-        self._peer_id = peer_id
+        self._name, self._peer_id = name, peer_id
         self.members = Members(Member(peer_id, "", name))
         self.chord_options = chord or ChordOptions()
         self._on_applied = on_applied
@@ -127,6 +126,7 @@ class Swarm:
             alive=lambda peer: self.liveness.answers(peer),
         )
         self.members.on_added = self.groups.member_back  # (re)started: groups catch it up
+        self.groups.applier.weigh = weight(store)  # a decision writes what it prepared
         self.liveness = Liveness(self.rpc, self.members, store, liveness)
         self.log = LogCommits(
             self.groups,
