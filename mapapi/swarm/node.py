@@ -349,18 +349,18 @@ class Swarm:
                 log.warning("not on the lookup ring: chunks are found by asking the members")
         await self.replicator.refresh()
 
+    async def _back(self, chunk: ChunkId) -> None:
+        await self.replicator.register(chunk)
+        try:  # compared once caught up: a replica behind is a prefix of any history
+            await self.reads.caught_up(chunk)
+        except MapError as exc:
+            log.warning("chunk %s has not caught up yet: %s", chunk.short, exc)
+
     async def rejoin(self) -> list[ChunkId]:
-        """The chunks this peer shares with others: their groups resumed at `start`
-        and catch up by themselves; this peer is registered again as their holder
-        in the lookup index, catches each up with its leader, and compares their
-        chains with the other holders' at once. Returns them."""
+        """The chunks this peer shares, their groups resumed at `start`: registered
+        again, caught up with their leaders at once, their chains compared."""
         back = self.replicator.shared()
-        for chunk in back:
-            await self.replicator.register(chunk)
-            try:  # compared once caught up: a replica behind is a prefix of any history
-                await self.reads.caught_up(chunk)
-            except MapError as exc:
-                log.warning("chunk %s has not caught up yet: %s", chunk.short, exc)
+        await asyncio.gather(*(self._back(chunk) for chunk in back))  # each waits for its leader
         await self.chains.compare(back)
         return back
 
