@@ -126,8 +126,10 @@ def persist_founding(store: ReplicaStore, chunk: ChunkId, boot: PersistentState)
     """Persist a founding member's first state: the configuration entry, applied,
     and the chunk's clock at its newest commit (a history from before the group)."""
     store.raft_save(chunk, hard=(1, NONE, 1), entries=rows(boot.entries))
-    newest = max((c.time for c in store.chunk_commits(chunk)), default=0)
-    store.raft_applied(chunk, 1, newest)
+    # the chain's last link is the newest commit (listing the commits scans every row)
+    links = store.chain_links(chunk)
+    record = store.commit_record(links[-1][0]) if links else None
+    store.raft_applied(chunk, 1, 0 if record is None else record.time)
 
 
 def snapshot_at(group: GroupState, index: int, data: bytes) -> tuple[int, int, bytes, bytes]:
@@ -202,3 +204,10 @@ def halted(group: GroupState, error: Exception) -> CorruptRepoError:
     )
     group.fail_all(halt)
     return halt
+
+
+def record_holders(store: ReplicaStore, chunk: ChunkId, peers: list[PeerId]) -> None:
+    """Record a group's members as the chunk's holders, unless they are already
+    (a write on the loop waits on SQLite's lock while a worker installs a chunk)."""
+    if store.holders(chunk) != peers:
+        store.set_holders(chunk, peers)

@@ -19,6 +19,7 @@ import logging
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 from mapapi.core import limits
 from mapapi.core.clock import LamportClock
@@ -43,6 +44,7 @@ from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.commit_check import CommitRule
 from mapapi.swarm.final_reads import FinalReads
 from mapapi.swarm.group_members import GroupMembers
+from mapapi.swarm.group_state import record_holders
 from mapapi.swarm.groups import Applied, RaftGroups
 from mapapi.swarm.liveness import Liveness, LivenessOptions
 from mapapi.swarm.log_commit import LogCommits
@@ -110,8 +112,7 @@ class Swarm:
         self.chord_options = chord or ChordOptions()
         self._on_applied = on_applied
         self._rules = tuple(rules)
-        # One Raft group per chunk held (DESIGN §13): its configuration is the holder
-        # set, its log carries every commit, multi-chunk ones in two phases.
+        # One Raft group per chunk held (DESIGN §13): its members hold it, its log commits.
         self.groups = RaftGroups(
             peer_id,
             store,
@@ -121,7 +122,7 @@ class Swarm:
             on_applied=self._applied,
             peers=lambda: [m.id for m in (*self.members.all(), *self.members.departed())],
             states=StoreStates(store),
-            on_members=store.set_holders,
+            on_members=partial(record_holders, store),
             # idle groups go quiet while the failure detector hears their leaders
             alive=lambda peer: self.liveness.answers(peer),
         )
@@ -281,7 +282,7 @@ class Swarm:
             )
         if self.members.get(member.id) is None:
             limits.count("members", len(self.members.all()) + 1)  # strangers with new ids
-        self.members.add(member)
+        self.members.add(member)  # and wakes its groups (`RaftGroups.member_back`)
         self.members.touch(member.id)
         return Welcome(tuple(self.members.all()))
 
@@ -289,14 +290,13 @@ class Swarm:
         """Introduce this peer to the member at `address` (its `rpc_hello`); its Welcome.
 
         Raises:
-            JoinRefused: it refused (another spatial index, or a forged Hello).
-            NetworkError: it did not answer in time.
+            JoinRefused, NetworkError: it refused (say another spatial index), or timed out.
         """
         hello = Hello(self.members.me, self.grid.config_fingerprint())
         return await self.rpc.request(address, hello, expect=Welcome)
 
     def rpc_bye(self, req: Request) -> Ack:
-        """A peer leaves the swarm gracefully (and the ring: route around it)."""
+        """A peer stops: unlisted, still in its groups; the ring routes around it."""
         member = self.members.get(req.sender)
         self.members.remove(req.sender)
         if member is not None and member.address and self._chord is not None:
