@@ -74,7 +74,8 @@ class KeyIndex:
     def catch_up(self, store: Store) -> None:
         """Read what was written to the held chunks since the last call; forget
         the chunks no longer held."""
-        held = {c.id for c in store.chunks(self.table)} if self.table in store.tables() else set()
+        # chunk ids, not `chunks()`: that counts every item of every chunk, at each commit
+        held = set(store.chunk_ids(self.table)) if self.table in store.tables() else set()
         for chunk in set(self._seen) - held:
             for item in self._in_chunk.pop(chunk, set()):
                 self._set(item, ())

@@ -113,7 +113,7 @@ class SqliteStore(SqliteChains):
             WHERE ? IS NULL OR c.table_name = ?
             GROUP BY c.id ORDER BY c.id"""
         rows = self._con().execute(sql, (table, table))
-        return [ChunkInfo(ChunkId(cid), t, n) for cid, t, n in rows]
+        return [ChunkInfo(ChunkId(c), t, n) for c, t, n in rows]
 
     def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
         """The ids of `chunks(table)`, in order, without counting their items."""
@@ -187,6 +187,7 @@ class SqliteStore(SqliteChains):
     ) -> list[Revision]:
         """Revisions written after `time`."""
         where, args = sqlite_rows.scope(table, chunk)
+        where = where.replace("r.chunk_id", "+r.chunk_id")  # the time index: few are newer
         sql = (
             f"SELECT {_REV_COLUMNS} FROM revisions r WHERE r.update_time > ?{where} "
             "ORDER BY r.update_time, r.item_id"
@@ -392,8 +393,7 @@ class SqliteStore(SqliteChains):
             fn(con, *args, **kwargs)
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
-        """Forget a chunk's replica (this peer left it); commit records stay, and so
-        does its chain (installing it again rebuilds it), but not its divergences."""
+        """Forget a chunk's replica and divergences; its commit records and chain stay."""
         con = self._con()
         with self._write(con):
             sqlite_replica.drop(con, chunk_id)

@@ -191,11 +191,14 @@ BENCHMARKS: dict[Command, tuple[str, ...]] = {
     ("bench", "soak"): ("--minutes", "0.1", "--peers", "3"),
     ("bench", "flood"): ("--senders", "2", "--megabytes", "3", "--mode", "frame"),
     ("bench", "sim"): ("--seeds", "2"),
+    ("bench", "mapping"): ("--robots", "2", "--holders", "2", "--seconds", "1"),
     ("demo",): ("--peers", "3"),
 }
 """The smallest run of each benchmark (and the demo), with its arguments."""
 
-_SCRATCH = {("bench", n) for n in ("local", "commit", "viewtest", "fuzz", "soak", "scale")}
+_SCRATCH = {
+    ("bench", n) for n in ("local", "commit", "viewtest", "fuzz", "soak", "scale", "mapping")
+}
 
 
 def run_benchmark(out: Outputs, path: Command, root: Path) -> None:
