@@ -112,11 +112,10 @@ class LogCommits:
                 (mergeable here: it carries `tx`).
             UsageError: a commit rule refused the changes.
             ChunkBusy: another transaction kept a chunk prepared too long.
-            NotChunkLeader: no leader was known in time (an election; retry).
-            RequestTimeout: no majority of a chunk's voters took the entry.
+            NotChunkLeader, NoQuorum: no leader, or no majority of voters (retry).
             ProposalLost: a multi-chunk commit was aborted, not committed (retry).
-            CommitUncertain: a multi-chunk commit's decision could not be learnt.
-            NetworkError: a leader could not be reached.
+            CommitUncertain: the entry was sent and its fate could not be learnt
+                (a timeout, a leader gone), or a multi-chunk commit's decision.
         """
         if not tx.changes:
             return Committed(None, ())
@@ -126,7 +125,11 @@ class LogCommits:
         chunks = self._chunks_of(tx)
         if len(chunks) < 2:
             (chunk,) = chunks
-            outcome = await self.propose(chunk, Proposal.of(tx, chunk, message, self.clock.tick()))
+            proposal = Proposal.of(tx, chunk, message, self.clock.tick())
+            try:
+                outcome = await self.propose(chunk, proposal)
+            except (RequestTimeout, PeerUnavailable) as exc:  # maybe taken: not to retry
+                raise CommitUncertain(f"commit {proposal.commit_id.short}: {exc}") from exc
             if outcome.record is not None:
                 await faults.reached("commit.acknowledged")
             return await self._done(tx, self._raise_failure(chunk, outcome, tx))
