@@ -34,6 +34,7 @@ from mapapi.swarm.raft_types import (
     PersistentState,
     ProposalRefused,
     RaftOptions,
+    Ready,
     Role,
 )
 from mapbench.sim_clients import CommitWorkload, CounterWorkload, Workload
@@ -70,6 +71,7 @@ class SimNode:
     paused_until: int = 0
     missed: int = 0  # ticks missed while paused
     ready_due: bool = False
+    writing: bool = False  # a Ready taken, its write not yet done
 
 
 class Sim:
@@ -104,6 +106,12 @@ class Sim:
         self.options = replace(options, quiesce=options.quiesce or quiet)
         self.rng = random.Random(seed)
         self.faults = replace(faults) if faults else world(self.rng)  # heal() mutates it
+        # Writes that end later, as a peer's Ready persisted in a worker thread while its
+        # loop steps on (`swarm/ready_disk.py`): drawn apart, as the quiet groups are.
+        self._disk_rng = random.Random(seed * 7907 + 5)
+        self.slow_writes = 0
+        if faults is None:
+            self.faults.slow_disk = self._disk_rng.choice([0.0, 0.0, 0.3, 0.7])
         self.compact_after = compact_after or self.rng.choice([4, 16, 10**9])
         if nodes is None or voters is None:
             drawn = self.rng.choice(SHAPES) if commits else (5, 3)
@@ -210,7 +218,7 @@ class Sim:
     def after(self, node: SimNode) -> None:
         """Check the node, then drive its Ready now or (sometimes) a little later."""
         self.checker.leader(node)
-        if node.ready_due or not node.raft.has_ready():
+        if node.ready_due or node.writing or not node.raft.has_ready():
             return
         if self.rng.random() < self.faults.defer_ready:
             node.ready_due = True
@@ -226,9 +234,27 @@ class Sim:
         self.process_ready(node)
 
     def process_ready(self, node: SimNode) -> None:
+        """Take the node's Ready and handle it, now or once its write ends later
+        (messages and ticks step the node meanwhile; a crash loses the write)."""
+        rd = node.raft.ready()
+        if self._disk_rng.random() >= self.faults.slow_disk:
+            self._handle_ready(node, rd)
+            return
+        node.writing = True
+        self.slow_writes += 1
+        address = node.address
+
+        def written() -> None:
+            if node.alive and node.address == address:
+                node.writing = False
+                self._handle_ready(node, rd)
+                self.after(node)
+
+        self.at(self._disk_rng.randrange(1, 2 * TICK), written)
+
+    def _handle_ready(self, node: SimNode, rd: Ready) -> None:
         """The driver loop of the Ready contract: persist, send, apply, advance."""
         raft, replica = node.raft, node.replica
-        rd = raft.ready()
         self.checker.persisted(node, rd.entries)
         node.disk.save(rd)
         for m in rd.messages:
@@ -450,6 +476,7 @@ class Sim:
             "failed": len(self.failed),
             "unknown": len(self.unknown),
             "terms": max(self.checker.leaders, default=0),
+            "slow_writes": self.slow_writes,
             **self.workload.counts(),
         }
 

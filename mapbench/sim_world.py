@@ -53,6 +53,7 @@ class Faults:
     max_delay: int
     defer_ready: float  # chance a node leaves its Ready unprocessed for a while
     fault_every: int  # mean time units between fault events
+    slow_disk: float = 0.0  # chance a Ready's write ends later, the node stepping meanwhile
 
 
 def world(rng: random.Random) -> Faults:

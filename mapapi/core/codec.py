@@ -16,7 +16,7 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from mapapi._pb.mapapi.v1 import core_pb2, maps_pb2, types_pb2
-from mapapi.core import limits
+from mapapi.core import limits, pb_parts
 from mapapi.core.change import Change, Conflict, Op
 from mapapi.core.chunk_state import ChunkState, TxState
 from mapapi.core.errors import CorruptRepoError
@@ -241,14 +241,29 @@ def _time(value: int) -> int:
     return limits.lamport("a time in a chunk's log entry", value)
 
 
+PART_ITEMS = 2000
+"""Rows of a chunk's state serialized in one call (about 300 KB)."""
+
+
 def encode_chunk_state(state: ChunkState) -> bytes:
-    """Serialize a chunk's whole state (a Raft snapshot's data)."""
-    m = core_pb2.ChunkSnapshot(table=state.table, type_name=state.type_name, time=state.time)
-    m.revisions.extend(revision_to_pb(r) for r in state.revisions)
-    m.commits.extend(commit_record_to_pb(c) for c in state.commits)
+    """Serialize a chunk's whole state (a Raft snapshot's data), in parts of
+    `PART_ITEMS` rows whose bytes are joined (`core/pb_parts.py`: no call holds
+    the interpreter lock for the whole chunk)."""
+    head = core_pb2.ChunkSnapshot(table=state.table, type_name=state.type_name, time=state.time)
+    out = [head.SerializeToString()]
+    for i in range(0, len(state.revisions), PART_ITEMS):
+        m = core_pb2.ChunkSnapshot()
+        m.revisions.extend(revision_to_pb(r) for r in state.revisions[i : i + PART_ITEMS])
+        out.append(m.SerializeToString())
+    for i in range(0, len(state.commits), PART_ITEMS):
+        m = core_pb2.ChunkSnapshot()
+        m.commits.extend(commit_record_to_pb(c) for c in state.commits[i : i + PART_ITEMS])
+        out.append(m.SerializeToString())
+    m = core_pb2.ChunkSnapshot()
     for tx in state.txs:
         m.txs.add(commit_id=tx.commit_id.to_bytes(), state=tx.state, time=tx.time, data=tx.data)
-    return bytes(m.SerializeToString())
+    out.append(m.SerializeToString())
+    return b"".join(out)
 
 
 def decode_chunk_state(data: bytes) -> ChunkState:
@@ -259,7 +274,8 @@ def decode_chunk_state(data: bytes) -> ChunkState:
     """
     m = core_pb2.ChunkSnapshot()
     try:
-        m.ParseFromString(data)
+        for part in pb_parts.parts(data):  # merged part by part, as it was written
+            m.MergeFromString(part)
         return ChunkState(
             m.table,
             m.type_name,

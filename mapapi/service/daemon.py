@@ -31,6 +31,7 @@ from mapapi.service.loop_lag import LoopLag
 from mapapi.service.pacing import Pacing
 from mapapi.service.peer_lock import PeerLock
 from mapapi.service.repo import PeerRecord
+from mapapi.store.wal import WalKeeper
 from mapapi.swarm import faults
 
 if TYPE_CHECKING:
@@ -168,6 +169,8 @@ async def serve(
     pacing.start()
     try:
         peer = open_peer(repo)
+        wal = WalKeeper(peer.store)  # its log checkpointed in a worker, never on the loop
+        wal.start()
         control = ControlServer(operations(peer, on_shutdown=stop.set, loop_lag=lag))
         record: PeerRecord | None = None
         keeper: asyncio.Task[None] | None = None
@@ -184,6 +187,7 @@ async def serve(
                 keeper.cancel()
                 await asyncio.gather(keeper, return_exceptions=True)
             control.stopping = True  # answer "stopping" while the members hear Bye
+            await wal.close()
             await peer.close()
             await control.close()
             if record is not None:

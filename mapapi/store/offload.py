@@ -19,11 +19,16 @@ but SQLite the function runs on the loop as before (the tests' stores, small).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from functools import partial
 from typing import ParamSpec, TypeVar
 
 from mapapi.store.sqlite import SqliteStore
+from mapapi.store.sqlite_connection import WriteBusy
+
+__all__ = ["WriteBusy", "off_loop", "without_waiting"]
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -41,3 +46,12 @@ def _in_worker(store: SqliteStore, call: Callable[[], T]) -> T:
     # The store's `close` waits while the function runs (a peer closing meanwhile).
     with store.worker():
         return call()
+
+
+def without_waiting(store: object) -> AbstractContextManager[None]:
+    """A block whose writes to `store` raise `WriteBusy` instead of waiting for
+    SQLite's write lock (held by a worker's long write): the loop then hands its
+    write to a worker too. Other stores never wait long: a block as any other."""
+    if isinstance(store, SqliteStore):
+        return store.no_wait()
+    return contextlib.nullcontext()

@@ -2,9 +2,8 @@
 
 Several threads and processes may open the file, each thread with its own
 connection; committers serialise on SQLite's write lock (`BEGIN IMMEDIATE`),
-which makes validation plus apply atomic across processes. WAL with
-`synchronous=NORMAL` keeps every acknowledged commit through a killed process;
-an OS crash or power loss may drop the last few."""
+which makes validation plus apply atomic across processes. WAL with `synchronous=NORMAL`
+keeps every acknowledged commit through a killed process; an OS crash may drop the last few."""
 
 from __future__ import annotations
 
@@ -49,6 +48,7 @@ class SqliteStore(SqliteChains):
         self._con = self._db.con
         self._write = self._db.write
         self.worker = self._db.worker  # a worker thread's use, which `close` waits for
+        self.no_wait, self.checkpoint = self._db.no_wait, self._db.checkpoint  # store/wal.py
         try:
             sqlite_schema.setup(self._db, create)
         except CorruptRepoError:

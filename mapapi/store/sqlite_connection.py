@@ -18,6 +18,15 @@ from mapapi.store.file_check import storage_error
 
 BUSY_TIMEOUT_MS = 30_000
 
+WAL_LIMIT_BYTES = 64 * 1024 * 1024
+"""Size the write-ahead log file is cut back to once checkpointed (SQLite keeps it
+at its largest otherwise: a mission imported once left 20 MB of it for good)."""
+
+
+class WriteBusy(Exception):
+    """Another connection holds SQLite's write lock, and the caller would not wait
+    (`Connections.no_wait`): never leaves the process."""
+
 
 CLOSE_WAIT = 60.0
 """Seconds `Connections.close` waits for worker threads still reading."""
@@ -57,8 +66,10 @@ class Connections:
             con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
             con.execute("PRAGMA synchronous=NORMAL")
             con.execute("PRAGMA foreign_keys=ON")
+            con.execute(f"PRAGMA journal_size_limit={WAL_LIMIT_BYTES}")
             self._local.con = con
             self._local.depth = 0
+            self._local.no_wait = self._local.hurried = False
             with self._all_lock:
                 self._all.append(con)
         return con
@@ -73,11 +84,7 @@ class Connections:
             finally:
                 self._local.depth -= 1
             return
-        try:
-            con.execute("BEGIN IMMEDIATE")
-        except sqlite3.OperationalError as exc:
-            locked = LockTimeout(f"repository {self.path} stayed locked: {exc}")
-            raise storage_error(self.path, exc) or locked from exc
+        self._begin(con)
         self._local.depth = 1
         try:
             yield
@@ -94,6 +101,45 @@ class Connections:
             self._local.depth = 0
         if self._on_commit is not None:
             self._on_commit(con)
+
+    def _begin(self, con: sqlite3.Connection) -> None:
+        """BEGIN IMMEDIATE: wait for the write lock, unless this thread asked not to."""
+        hurry = self._local.no_wait
+        if hurry:
+            con.execute("PRAGMA busy_timeout=0")
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:
+            if hurry and exc.sqlite_errorcode == sqlite3.SQLITE_BUSY:
+                raise WriteBusy(str(self.path)) from None
+            locked = LockTimeout(f"repository {self.path} stayed locked: {exc}")
+            raise storage_error(self.path, exc) or locked from exc
+        finally:
+            if hurry:
+                con.execute(f"PRAGMA busy_timeout={BUSY_TIMEOUT_MS}")
+
+    @contextmanager
+    def no_wait(self) -> Iterator[None]:
+        """Within the block, this thread's outermost write transactions do not wait
+        for SQLite's write lock: they raise `WriteBusy` while another connection
+        holds it (the event loop's writes, which a worker's long one must not stall).
+        Its connection no longer checkpoints the log either: the commit that
+        crosses SQLite's threshold copies the whole log into the file, tens of ms
+        after a big install; workers' commits and `checkpoint` do that instead."""
+        con = self.con()
+        if not self._local.hurried:
+            con.execute("PRAGMA wal_autocheckpoint=0")
+            self._local.hurried = True
+        self._local.no_wait = True
+        try:
+            yield
+        finally:
+            self._local.no_wait = False
+
+    def checkpoint(self) -> None:
+        """Copy what the write-ahead log holds into the file, as far as no reader
+        still needs it (PASSIVE: waits for no one), and cut the log back."""
+        self.con().execute("PRAGMA wal_checkpoint(PASSIVE)")
 
     @contextmanager
     def worker(self) -> Iterator[None]:

@@ -11,7 +11,8 @@ that, the peer's heartbeats stopped and its groups' leaders were deposed.
 So the Ready loop hands its committed entries and snapshots to `GroupApplier`:
 
 - work that is small, with nothing of the group queued, is applied at once on
-  the loop (most commits: a hop to a thread would cost more than the write);
+  the loop (most commits: a hop to a thread would cost more than the write),
+  unless a worker holds SQLite's write lock: the loop never waits for it;
 - anything else waits in the group's queue, and one task per group writes it in
   a worker thread (`store/offload.py`), in order, then answers the proposers and
   calls the applied hook on the loop.
@@ -34,7 +35,7 @@ from dataclasses import dataclass
 
 from mapapi.core.ids import ChunkId
 from mapapi.store.base import ReplicaStore
-from mapapi.store.offload import off_loop
+from mapapi.store.offload import WriteBusy, off_loop, without_waiting
 from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.group_state import (
     Applied,
@@ -165,8 +166,14 @@ class GroupApplier:
     def _add(self, group: GroupState, work: Work) -> None:
         chunk = group.chunk
         if self.idle(chunk) and self._light(chunk, work):  # raises: the caller halts
-            self._finish(group, work, self._write(chunk, work))
-            return
+            try:
+                with without_waiting(self._store):
+                    done = self._write(chunk, work)
+            except WriteBusy:
+                pass  # a worker's long write holds the lock: this one waits in a worker too
+            else:
+                self._finish(group, work, done)
+                return
         self._queues.setdefault(chunk, deque()).append(work)
         if chunk not in self._tasks:
             loop = asyncio.get_running_loop()

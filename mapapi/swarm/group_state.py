@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -80,6 +80,47 @@ class GroupState:
         for waiting in self.reads.values():
             if not waiting.done():
                 waiting.set_exception(error)
+
+    def read(self, context: bytes) -> Callable[[Callable[[], int], float], Awaitable[int]]:
+        """Ask the node for a ReadIndex under `context` (raises `NotLeader`); the
+        wait for it: until it is confirmed and the store (`applied`) reached it."""
+        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        self.node.read_index(context)
+        self.reads[context] = done
+
+        async def wait(applied: Callable[[], int], timeout: float) -> int:  # noqa: ASYNC109
+            try:
+                async with asyncio.timeout(timeout):
+                    index = await done
+                    while applied() < index:
+                        self.progress.clear()
+                        await self.progress.wait()
+                    return index
+            except TimeoutError:
+                raise RequestTimeout(
+                    f"chunk {self.chunk.short}: its leader did not confirm a read within "
+                    f"{timeout:g} s"
+                ) from None
+            finally:
+                self.reads.pop(context, None)
+
+        return wait
+
+    async def applied(
+        self,
+        index: int,
+        done: asyncio.Future[Applied],
+        timeout: float,  # noqa: ASYNC109
+        peer_of: Callable[[int], PeerId | None],
+    ) -> Applied:
+        """What applying the entry at `index` did, once it did (`done`); the
+        error of an entry not committed within `timeout` (`not_committed`)."""
+        try:
+            async with asyncio.timeout(timeout):
+                return await done
+        except TimeoutError:
+            self.waiting.pop(index, None)
+            raise not_committed(self, index, timeout, peer_of) from None
 
     def fail_all(self, error: Exception) -> None:
         """Fail every proposal still waiting (the peer is closing)."""

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from functools import partial
 
-from mapapi.core.errors import CorruptRepoError, NotChunkLeader, PeerUnavailable, RequestTimeout
+from mapapi.core.errors import CorruptRepoError, NotChunkLeader, PeerUnavailable
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import Ack, RaftBatch
 from mapapi.net.rpc import Request, Rpc
@@ -37,8 +37,6 @@ from mapapi.swarm.group_state import (
     ApplyFn,
     GroupState,
     halted,
-    not_committed,
-    persist,
     persist_founding,
     step_batch,
 )
@@ -51,9 +49,11 @@ from mapapi.swarm.raft_types import (
     NotLeader,
     PersistentState,
     RaftOptions,
+    Ready,
     Role,
 )
 from mapapi.swarm.raft_wire import node_id, state_of
+from mapapi.swarm.ready_disk import ReadyDisk
 
 log = logging.getLogger(__name__)
 
@@ -107,6 +107,7 @@ class RaftGroups:
         self.mail = RaftMail(rpc, address, peers)
         done = self._members_changed  # deferred while a snapshot is being installed
         self.applier = GroupApplier(store, states, apply, on_applied, self._halt, done)
+        self.disk = ReadyDisk(store, self._saved, self._halt)
         self._options = replace(options or RaftOptions(), quiesce=alive is not None)
         self._rng = random.Random(seed)
         self._on_change = on_change or (lambda: None)
@@ -125,6 +126,7 @@ class RaftGroups:
             self._ticker.cancel()
             await asyncio.gather(self._ticker, return_exceptions=True)
             self._ticker = None
+        await self.disk.close()
         await self.applier.close()
         for group in self._groups.values():
             group.fail_all(PeerUnavailable("this peer is closing"))
@@ -263,7 +265,7 @@ class RaftGroups:
         self.applier.forget(chunk)
         if group is not None:
             group.fail_all(PeerUnavailable(f"this peer left chunk {chunk.short}"))
-        self.store.raft_drop(chunk)
+        self.disk.then(chunk, partial(self.store.raft_drop, chunk))  # after a write under way
 
     async def catch_up(self, chunk: ChunkId, timeout: float = PROPOSE_TIMEOUT) -> int:  # noqa: ASYNC109
         """Wait until this replica has applied everything the chunk's group had
@@ -277,28 +279,13 @@ class RaftGroups:
         group = self._group(chunk)
         self._reads += 1
         context = self.me.to_bytes() + self._reads.to_bytes(8, "big")
-        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
-        group.reads[context] = done
         try:
-            group.node.read_index(context)
+            reading = group.read(context)
         except NotLeader as exc:
-            group.reads.pop(context, None)
             raise NotChunkLeader.of(chunk, self._peer(exc.leader)) from None
         self._process(group)
         self._flush()
-        try:
-            async with asyncio.timeout(timeout):
-                index = await done
-                while self.applied(chunk) < index:
-                    group.progress.clear()
-                    await group.progress.wait()
-        except TimeoutError:
-            raise RequestTimeout(
-                f"chunk {chunk.short}: its leader did not confirm a read within {timeout:g} s"
-            ) from None
-        finally:
-            group.reads.pop(context, None)
-        return index
+        return await reading(partial(self.applied, chunk), timeout)
 
     async def _await_entry(
         self,
@@ -316,12 +303,7 @@ class RaftGroups:
         group.waiting[index] = (term, done)
         self._process(group)
         self._flush()
-        try:
-            async with asyncio.timeout(timeout):
-                return await done
-        except TimeoutError:
-            group.waiting.pop(index, None)
-            raise not_committed(group, index, timeout, self._peer) from None
+        return await group.applied(index, done, timeout, self._peer)
 
     def _group(self, chunk: ChunkId) -> GroupState:
         group = self._groups.get(chunk)
@@ -363,27 +345,42 @@ class RaftGroups:
         return halted(group, error)
 
     def _ready_loop(self, group: GroupState) -> None:
-        while group.node.has_ready():
+        while not self.disk.busy(group.chunk) and group.node.has_ready():
             rd = group.node.ready()
-            persist(self.store, group.chunk, rd)
-            for message in rd.messages:
-                self.mail.post(group.chunk, message)
-            snap = None if rd.snapshot is None else (rd.snapshot.data, rd.snapshot.index)
-            self.applier.hand(group, rd.committed_entries, snap)
-            for read in rd.read_states:
-                waiting = group.reads.get(read.context)
-                if waiting is not None and not waiting.done():
-                    waiting.set_result(read.index)
-            if (rd.role, rd.leader) != (group.role, group.leader):
-                group.new_leader(rd.role, rd.leader, NotChunkLeader.of(group.chunk, None))
-                log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
-                self._on_change()
-            group.node.advance(rd)
-            if self.applier.idle(group.chunk):  # else once applied: a snapshot makes the chunk
-                self._members_changed(group)
-            done = group.node.log.applied - group.node.log.snapshot.index
-            if done >= self.compact_after:
-                self.applier.compact(group, group.node.log.applied)
+            if self.disk.save(group, rd):  # else a worker writes it, and `_saved` goes on
+                self._handle(group, rd)
+
+    def _saved(self, group: GroupState, rd: Ready) -> None:
+        """A Ready a worker wrote: handle it, and the group's next ones."""
+        if self._groups.get(group.chunk) is not group:
+            return  # left or halted meanwhile
+        with contextlib.suppress(CorruptRepoError):  # halted: logged, and gone
+            try:
+                self._handle(group, rd)
+            except Exception as exc:
+                raise self._halt(group, exc) from exc
+            self._process(group)
+        self._flush()
+
+    def _handle(self, group: GroupState, rd: Ready) -> None:
+        """Send, apply and advance a persisted Ready."""
+        for message in rd.messages:
+            self.mail.post(group.chunk, message)
+        snap = None if rd.snapshot is None else (rd.snapshot.data, rd.snapshot.index)
+        self.applier.hand(group, rd.committed_entries, snap)
+        for read in rd.read_states:
+            waiting = group.reads.get(read.context)
+            if waiting is not None and not waiting.done():
+                waiting.set_result(read.index)
+        if (rd.role, rd.leader) != (group.role, group.leader):
+            group.new_leader(rd.role, rd.leader, NotChunkLeader.of(group.chunk, None))
+            log.debug("chunk %s: %s, leader %s", group.chunk.short, rd.role.name, rd.leader)
+            self._on_change()
+        group.node.advance(rd)
+        if self.applier.idle(group.chunk):  # else once applied: a snapshot makes the chunk
+            self._members_changed(group)
+        if group.node.log.applied - group.node.log.snapshot.index >= self.compact_after:
+            self.applier.compact(group, group.node.log.applied)
 
     def _members_changed(self, group: GroupState) -> None:
         """Report the group's members if they changed (the store's holders follow)."""

@@ -93,3 +93,27 @@ def all_committed(node: Node) -> bool:
     """Whether the leader's log committed every entry it holds of chunk A."""
     log = node.groups._group(A).node.log  # the core's indexes, as this peer knows them
     return log.committed == log.last_index
+
+
+async def test_a_ready_waits_for_the_write_lock_in_a_worker_not_on_the_loop(world: World) -> None:
+    """A worker holds SQLite's write lock (a big entry being applied): the next
+    proposal's Ready is written by a worker once the lock is free (`ready_disk.py`),
+    and meanwhile the loop answers; both entries then apply in log order."""
+    (node,) = await gated(world, 1, [A])
+    other = await world.add()
+    big = asyncio.ensure_future(node.groups.propose(A, BIG))
+    await node.wait(lambda: bool(Gated.threads))  # the worker holds the lock
+    small = asyncio.ensure_future(node.groups.propose(A, b"after"))
+
+    pong = await other.rpc.request(world.addresses[node.id], Ping(b"up?"), expect=Pong)
+
+    assert pong.payload == b"up?"
+    assert node.groups.disk.busy(A)  # its Ready waits in a worker
+    assert not small.done()
+    Gated.gate.set()
+    await asyncio.gather(big, small)
+    assert node.applied[A] == [BIG, b"after"]
+    kept = node.store.raft_load(A)
+    assert kept is not None
+    assert [e.data for e in kept.entries][-2:] == [BIG, b"after"]
+    assert not node.groups.disk.busy(A)

@@ -1,0 +1,110 @@
+"""Persisting each group's `Ready` without ever waiting on the event loop for
+SQLite's write lock (issue 14 §1; etcd-io/raft's asynchronous storage writes
+are the model).
+
+A Ready must be on disk before its messages leave (a vote or an append
+acknowledged and then forgotten in a crash breaks Raft). Most Readies are a
+few rows, written on the loop in well under a millisecond. But SQLite has one
+writer at a time, and a worker thread may hold the lock for a long while: a
+snapshot of 20,000 rows being installed, a big entry applied. A write on the
+loop then waited for it, 30-60 ms measured in the stall benchmark, and every
+heartbeat of the peer waited too.
+
+So the loop tries first without waiting (`store.offload.without_waiting`).
+When the lock is taken, or the Ready is big (a snapshot of megabytes received,
+an imported mission's entry), the Ready goes to a worker thread, which waits there,
+and the group takes no new Ready until that write is done; its node keeps
+stepping messages and ticks meanwhile (what it then sends waits for the next
+Ready, so nothing leaves before the state it depends on is on disk). The
+simulator runs the same contract with writes that end later (`mapbench.sim`,
+`slow_disk`) and checks Raft's safety properties across crashes in between.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+
+from mapapi.core.ids import ChunkId
+from mapapi.store.base import ReplicaStore
+from mapapi.store.offload import WriteBusy, off_loop, without_waiting
+from mapapi.swarm.group_apply import HEAVY_BYTES
+from mapapi.swarm.group_state import GroupState, persist
+from mapapi.swarm.raft_types import Ready
+
+SavedFn = Callable[[GroupState, Ready], None]
+"""Called on the loop once a Ready handed to a worker is on disk."""
+FailedFn = Callable[[GroupState, Exception], object]
+"""Called on the loop when a worker's write of a Ready failed (the group halts)."""
+
+
+class ReadyDisk:
+    """Writes groups' Readies: on the loop when the lock is free, else in a worker.
+
+    Args:
+        store: where the groups persist.
+        on_saved: continues a group's Ready loop once its deferred write is done.
+        on_failed: halts a group whose deferred write failed.
+    """
+
+    def __init__(self, store: ReplicaStore, on_saved: SavedFn, on_failed: FailedFn) -> None:
+        self._store = store
+        self._on_saved = on_saved
+        self._on_failed = on_failed
+        self._writing: dict[ChunkId, asyncio.Task[None]] = {}
+
+    def busy(self, chunk: ChunkId) -> bool:
+        """Whether a Ready of the chunk's group is being written in a worker."""
+        return chunk in self._writing
+
+    def save(self, group: GroupState, rd: Ready) -> bool:
+        """Persist `rd` now if the store's write lock is free (True: go on with
+        it); else start writing it in a worker and return False (`on_saved`
+        follows). Raises what the store raises on the loop (the caller halts)."""
+        try:
+            if _heavy(rd):
+                raise WriteBusy("a big write")
+            with without_waiting(self._store):
+                persist(self._store, group.chunk, rd)
+        except WriteBusy:
+            task = asyncio.get_running_loop().create_task(
+                self._later(group, rd), name=f"persist {group.chunk.short}"
+            )
+            self._writing[group.chunk] = task
+            return False
+        return True
+
+    async def _later(self, group: GroupState, rd: Ready) -> None:
+        try:
+            await off_loop(self._store, persist, self._store, group.chunk, rd)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self._writing.pop(group.chunk, None)
+            self._on_failed(group, exc)
+            return
+        self._writing.pop(group.chunk, None)
+        self._on_saved(group, rd)
+
+    def then(self, chunk: ChunkId, action: Callable[[], None]) -> None:
+        """Run `action` on the loop once the chunk's write under way ends (now if none):
+        forgetting a group must not race the worker writing its last Ready."""
+        task = self._writing.pop(chunk, None)
+        if task is None:
+            action()
+        else:
+            task.add_done_callback(lambda _: action())
+
+    async def close(self) -> None:
+        """Stop following the writes under way: each completes in its thread (the
+        store's `close` waits for it), and its Ready is not handled further."""
+        tasks = list(self._writing.values())
+        self._writing.clear()
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def _heavy(rd: Ready) -> bool:
+    """Whether writing `rd` takes long enough to be a worker's job in any case."""
+    return rd.snapshot is not None or sum(len(e.data) for e in rd.entries) >= HEAVY_BYTES
