@@ -121,6 +121,18 @@ def decide(store: ReplicaStore, chunk: ChunkId, proposal: Proposal) -> Outcome |
     return Held(accepted, latest, max(proposal.time, chunk_clock(store, chunk) + 1))
 
 
+def early_conflicts(store: ReplicaStore, chunk: ChunkId, entry: object) -> tuple[Conflict, ...]:
+    """The conflicts a chunk's leader answers before appending `entry` (issue 13 §3):
+    those its applied replica shows already. Conflicts only grow as entries apply
+    (an item's newest revision only gets newer), so every holder would decide the
+    entry so too, and the loser learns it without a round of the log. Anything
+    else (a prepare, a chunk held by one, a proposal that holds) is decided at apply."""
+    if not isinstance(entry, Proposal) or entry.is_prepare:
+        return ()
+    decided = decide(store, chunk, entry)
+    return decided.conflicts if isinstance(decided, Outcome) else ()
+
+
 def write_commit(
     store: ReplicaStore, chunk: ChunkId, record: CommitRecord, revisions: Sequence[Revision]
 ) -> None:

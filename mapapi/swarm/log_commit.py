@@ -2,11 +2,11 @@
 
 The writer turns its transaction into a `Proposal` for the chunk and hands it to
 the chunk's leader: itself, or the leader its group names, over the swarm port
-(`RaftPropose`). The leader appends it, and once the entry applies there (every
-holder decides it alike, `swarm/apply.py`) answers with the commit, or with the
-conflicts as a `ConflictError`. The application's commit rules are checked
-here, over the whole transaction, before it is proposed. The
-writer's transaction then knows its commit, or can be merged and tried again.
+(`RaftPropose`). The leader answers at once the conflicts its replica shows
+already (`apply.early_conflicts`), else appends it, and once the entry applies
+there (every holder decides it alike, `swarm/apply.py`) answers with the commit,
+or with the conflicts as a `ConflictError`. The application's commit rules are
+checked here, over the whole transaction, before it is proposed.
 
 A transaction that writes several chunks commits in two phases across their
 logs: `swarm/two_phase.py` decides what to propose, this module proposes it
@@ -42,7 +42,7 @@ from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.offload import off_loop
 from mapapi.swarm import faults
-from mapapi.swarm.apply import Outcome
+from mapapi.swarm.apply import Outcome, early_conflicts
 from mapapi.swarm.commit_check import CommitRule, checked_entry
 from mapapi.swarm.group_apply import HEAVY_BYTES
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
@@ -52,9 +52,8 @@ log = logging.getLogger(__name__)
 
 BIG_CHANGES = 500
 """Changes from which a writer encodes its entry in a worker thread (`HEAVY_BYTES`)."""
-RETRY_PAUSE = 0.01
-"""Seconds before a proposal is made again after "busy" or "no leader" (doubling)."""
-MAX_RETRY_PAUSE = 0.2
+RETRY_PAUSE, MAX_RETRY_PAUSE = 0.01, 0.2
+"""Seconds before a proposal is made again after "busy" or "no leader" (doubling, to 0.2)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,9 +76,8 @@ class LogCommits:
             transaction before it is proposed (they may read other chunks than the
             ones written, which holders of one chunk need not hold: a holder's
             decision depends on its replica of the chunk alone).
-        answers: whether a peer was heard of lately (liveness); when most of a
-            chunk's voters were not, a failed proposal or read names them
-            (`NoQuorum`).
+        answers: whether a peer was heard of lately (liveness); when most of a chunk's
+            voters were not, a failed proposal or read names them (`NoQuorum`).
         label: how errors name a peer.
     """
 
@@ -329,6 +327,8 @@ class LogCommits:
 
     async def _propose_once(self, chunk: ChunkId, entry: LogEntry, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):
+            if conflicts := early_conflicts(self.groups.store, chunk, entry):
+                return Outcome(conflicts=conflicts)  # known here: no round of the log
             outcome = (await self.groups.propose(chunk, data)).result
             assert isinstance(outcome, Outcome)  # the groups apply with `apply_tx.applier`
             return outcome
@@ -353,8 +353,7 @@ class LogCommits:
     def _raise_failure(
         self, chunk: ChunkId, outcome: Outcome, tx: Transaction | None = None
     ) -> Outcome:
-        """`outcome`, unless it is a failure: then its error (a conflict mergeable
-        into `tx`)."""
+        """`outcome`, unless it is a failure: then its error (mergeable into `tx`)."""
         if outcome.conflicts:
             raise ConflictError(list(outcome.conflicts), tx, self.groups.store.raft_time(chunk))
         return outcome
@@ -382,7 +381,8 @@ class LogCommits:
         members = {self.groups.me, *self.groups.members(body.chunk)}
         args = (self.groups.store, body.chunk, body.proposal, req.sender, members)
         if len(body.proposal) < HEAVY_BYTES:
-            checked_entry(*args)
+            entry = checked_entry(*args)  # conflicts known here need no round of the log:
+            self._raise_failure(body.chunk, Outcome(conflicts=early_conflicts(*args[:2], entry)))
         else:  # a mission's rows: decoded and checked in a worker (issue 14 §1)
             await off_loop(self.groups.store, checked_entry, *args)
         applied = (await self.groups.propose(body.chunk, body.proposal)).result

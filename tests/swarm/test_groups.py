@@ -250,6 +250,28 @@ async def test_a_conflict_reaches_a_follower_mergeable(world: World) -> None:
     assert await merged.commit("merged") is not None
 
 
+async def test_a_conflict_the_leader_sees_already_takes_no_round_of_the_log(
+    world: World,
+) -> None:
+    """A stale transaction, from a follower or the leader itself, is answered its
+    conflict by the leader's replica at once: its proposal is never appended."""
+    nodes, leader = await writers(world)
+    first, second = (n for n in nodes if n is not leader)
+    await tx_of(first, b"0", Op.INSERT).commit("a0")
+    await second.wait(lambda: second.store.latest([COUNTER]) != {})
+    await leader.wait(lambda: leader.store.latest([COUNTER]) != {})
+    stale = [tx_of(second, b"2"), tx_of(leader, b"3")]
+    await tx_of(first, b"1").commit("first")  # answered once the leader applied it
+    log = leader.groups._group(CHUNK).node.log  # the core's log, as the leader holds it
+    last = log.last_index
+
+    for tx in stale:
+        with pytest.raises(ConflictError) as caught:
+            await tx.commit("stale")
+        assert [c.item_id for c in caught.value.conflicts] == [COUNTER]
+    assert log.last_index == last
+
+
 async def test_a_follower_catches_up_before_a_fresh_read(world: World) -> None:
     nodes = await founded(world, [CHUNK])
     leader = await leader_of(nodes, CHUNK)
