@@ -295,3 +295,16 @@ def measures(title: str, result: dict[str, Any], as_json: bool) -> None:
         return
     rows = [(k, v) for k, v in result.items() if not isinstance(v, dict | list)]
     table(title, ["measure", "value"], rows)
+
+
+def staleness(replicas: dict[str, Any]) -> str:
+    """What a stale view's answer says about how old this peer's replicas may be."""
+    silent = replicas["leaders_silent_s"]
+    if silent is None:
+        return "stale: the replicas here are all this peer knows (it is in no swarm)"
+    if silent == 0:
+        return "stale: read without asking; this peer leads every chunk it holds"
+    return (
+        f"stale: read without asking the chunks' leaders; the longest silent spoke here "
+        f"{silent:g} s ago (newer commits may exist elsewhere)"
+    )

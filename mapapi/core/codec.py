@@ -140,7 +140,9 @@ def conflict_from_pb(m: core_pb2.Conflict) -> Conflict:
 
 def encode_view(view: View) -> bytes:
     """Serialize a CLI view (a transaction kept between commands)."""
-    state = core_pb2.ViewState(name=view.name, begin_time=view.begin_time, isolation=view.isolation)
+    state = core_pb2.ViewState(
+        name=view.name, begin_time=view.begin_time, isolation=view.isolation, stale=view.stale
+    )
     state.changes.extend(change_to_pb(c) for c in view.changes)
     state.conflicts.extend(conflict_to_pb(c) for c in view.conflicts)
     _put_reads(state, view.read_set, view.scopes)
@@ -165,6 +167,7 @@ def decode_view(blob: bytes) -> View:
             conflicts,
             set(_read_set(state)),
             set(_scopes(state)),
+            state.stale,
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a stored view does not parse: {exc}") from exc

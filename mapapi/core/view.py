@@ -43,6 +43,7 @@ class View:
     conflicts: list[Conflict] = field(default_factory=list)
     read_set: set[ItemId] = field(default_factory=set)
     scopes: set[Scope] = field(default_factory=set)
+    stale: bool = False  # reads this peer's replicas as they are (`Peer.begin(stale=True)`)
 
     def staged_since_conflict(self) -> dict[ItemId, Change]:
         """Per conflicting item, the change staged after the conflict, if any."""

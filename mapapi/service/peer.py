@@ -24,6 +24,7 @@ from mapapi.lookup.spatial import BBox, SpatialGrid
 from mapapi.lookup.spatial_index import QueryStats
 from mapapi.service.fsck import rollback_text
 from mapapi.service.repo import Repository
+from mapapi.service.stale import StaleReads
 from mapapi.service.tables import Tables
 from mapapi.store import ChunkInfo, MemoryStore, offload
 from mapapi.store.base import ReplicaStore
@@ -339,12 +340,19 @@ class Peer:
         self.clock.advance_to(self.store.clock())
         return self.clock.now() if self.swarm is not None else self.store.clock()
 
-    def begin(self, at: int | None = None, *, isolation: Isolation = "snapshot") -> Transaction:
+    def begin(
+        self, at: int | None = None, *, isolation: Isolation = "snapshot", stale: bool = False
+    ) -> Transaction:
         """A transaction reading the map as of now (or of logical time `at`).
 
         Begun now in a swarm, its first read catches up the chunks it reads and
         moves its time to their newest commit if that is later (`catch_up`), so it
-        sees every commit acknowledged before that read, on any peer."""
+        sees every commit acknowledged before that read, on any peer. `stale`:
+        it reads this peer's replicas as they are, asking no one (`service/stale.py`)."""
+        if stale:
+            if at is not None:
+                raise UsageError("a stale view reads the replicas as they are now: no --at")
+            return Transaction(StaleReads(self), self.store.clock(), self.id, isolation=isolation)
         now = self.now()
         if at is not None and not 0 <= at <= now:
             raise UsageError(f"time {at} is outside 0..{now} (the newest commit time)")

@@ -18,9 +18,11 @@ from mapapi.service.ops import (
     resolve_id,
     revision_json,
 )
+from mapapi.service.stale import staleness
 
 if TYPE_CHECKING:
     from mapapi.core.change import Conflict
+    from mapapi.core.transaction import Isolation
     from mapapi.service.peer import Peer
     from mapapi.service.workspace import View, Workspace
 
@@ -33,6 +35,7 @@ def view_json(view: View) -> Json:
         "name": view.name,
         "begin_time": view.begin_time,
         "isolation": view.isolation,
+        "stale": view.stale,
         "staged": len(view.changes),
         "conflicts": len(view.conflicts),
     }
@@ -67,10 +70,15 @@ class ViewOperations:
             "resolve": self.resolve,
         }
 
-    async def view_open(self, view: str, at: int | None = None, serializable: bool = False) -> Json:
-        """Begin a view."""
-        opened = self.views.open(view, at, "serializable" if serializable else "snapshot")
-        return view_json(opened)
+    async def view_open(
+        self, view: str, at: int | None = None, serializable: bool = False, stale: bool = False
+    ) -> Json:
+        """Begin a view (`stale`: on the replicas as they are, and how old they may be)."""
+        isolation: Isolation = "serializable" if serializable else "snapshot"
+        opened = view_json(self.views.open(view, at, isolation, stale))
+        if stale:
+            opened["replicas"] = staleness(self.peer).as_dict()
+        return opened
 
     async def view_abort(self, view: str) -> Json:
         """Drop a view."""

@@ -21,6 +21,7 @@ from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.transaction import Isolation, Transaction
 from mapapi.core.view import Side, View, discards, mapctl_in, settle
 from mapapi.service.peer import Peer
+from mapapi.service.stale import StaleReads
 
 
 class Workspace:
@@ -59,13 +60,20 @@ class Workspace:
         """Every view, by name."""
         return [v for n in sorted(self.peer.store.views()) if (v := self.get(n)) is not None]
 
-    def open(self, name: str, at: int | None = None, isolation: Isolation = "snapshot") -> View:
-        """Begin a view now, or at the past logical time `at`.
+    def open(
+        self,
+        name: str,
+        at: int | None = None,
+        isolation: Isolation = "snapshot",
+        stale: bool = False,
+    ) -> View:
+        """Begin a view now, or at the past logical time `at`, or (`stale`) on this
+        peer's replicas as they are (`service/stale.py`).
 
         Raises:
             ViewClosedError: the view exists and holds staged changes or conflicts.
         """
-        tx = self.peer.begin(at, isolation=isolation)  # validates `at`
+        tx = self.peer.begin(at, isolation=isolation, stale=stale)  # validates `at`
         with self.peer.store.exclusive():
             old = self.get(name)
             if old is not None and (old.changes or old.conflicts):
@@ -74,7 +82,7 @@ class Workspace:
                     f"{len(old.conflicts)} conflict(s); commit or "
                     f"`{mapctl_in(name)} view abort` first"
                 )
-            view = View(name, tx.begin_time, isolation)
+            view = View(name, tx.begin_time, isolation, stale=stale)
             self._save(view)
         return view
 
@@ -87,8 +95,9 @@ class Workspace:
     # -- reads and staging -----------------------------------------------------
     def transaction(self, view: View) -> Transaction:
         """A live transaction equivalent to the view."""
+        backend = StaleReads(self.peer) if view.stale else self.peer
         tx = Transaction(
-            self.peer, view.begin_time, self.peer.id, isolation=view.isolation, view=view.name
+            backend, view.begin_time, self.peer.id, isolation=view.isolation, view=view.name
         )
         for change in view.changes:
             tx.stage(change)
@@ -119,6 +128,8 @@ class Workspace:
         write would take a commit made meanwhile on a peer with a slower Lamport
         clock as already seen, and overwrite it."""
         view = self.get(name)
+        if view is not None and view.stale:
+            return  # it asks no one (a commit built on a stale read conflicts at the leader)
         await self.peer.pin(item_id, self.peer.now() if view is None else view.begin_time)
 
     def stage_set(

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -54,6 +55,7 @@ class GroupState:
     progress: asyncio.Event = field(default_factory=asyncio.Event)  # set when entries apply
     reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
     members: frozenset[int] = frozenset()  # the configuration last reported (`on_members`)
+    heard: float = field(default_factory=time.monotonic)  # when its leader last spoke here
 
     def settle(self, entries: tuple[Entry, ...], results: dict[int, Applied]) -> None:
         """Answer the proposals of these applied entries: with what applying did,
@@ -228,6 +230,8 @@ def step_batch(
             log.warning("refused a malformed raft message from %s: %s", sender.short, exc)
             continue
         group.node.step(message)
+        if group.node.leader == node:
+            group.heard = time.monotonic()
         touched[group.chunk] = group
     return list(touched.values())
 

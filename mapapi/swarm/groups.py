@@ -1,17 +1,14 @@
 """The multi-Raft shell: one Raft group per chunk this peer holds (DESIGN §13).
 
-`RaftGroups` drives a pure `RaftNode` (`swarm/raft.py`) per chunk through the
-Ready loop: it persists each `Ready` (`Store.raft_save`) before sending its
-messages, and hands committed entries to `GroupApplier` (`swarm/group_apply.py`),
-which applies them with the applied index in one store transaction (an entry
-lands once, even across a crash), big ones in a worker thread, and answers their
-proposers. One ticker drives every group; all messages for one peer leave in one
-`RaftBatch` per round (`swarm/raft_mail.py`), so many shared groups' heartbeats
-cost one frame per pair of peers. With a `StoreStates`, logs are compacted into
-snapshots of the chunk's state, which a member that joins or lags far behind
-installs (`swarm/chunk_state.py`). A peer's node id is the top 63 bits of its
-`PeerId` (`node_id`), the same in every group: configurations name peers, never
-addresses.
+`RaftGroups` drives a pure `RaftNode` (`swarm/raft.py`) per chunk through the Ready loop: it
+persists each `Ready` before sending its messages (`ready_disk.py`), and hands committed
+entries to `GroupApplier` (`group_apply.py`), which applies them with the applied index in one
+store transaction (an entry lands once, even across a crash), and answers their proposers.
+One ticker drives every group; all messages for one peer leave in one `RaftBatch`
+per round (`swarm/raft_mail.py`): many groups' heartbeats cost one frame per pair of peers.
+With a `StoreStates`, logs are compacted into snapshots of the chunk's state, which a member
+that joins or lags far behind installs (`swarm/chunk_state.py`). A peer's node id is the top
+63 bits of its `PeerId` (`node_id`), the same in every group: configurations name peers.
 """
 
 from __future__ import annotations
@@ -20,6 +17,7 @@ import asyncio
 import contextlib
 import logging
 import random
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from functools import partial
@@ -196,6 +194,11 @@ class RaftGroups:
         group = self._group(chunk)
         peers = (self._peer(n) for n in group.node.config.members if n != node_id(self.me))
         return [p for p in peers if p is not None]
+
+    def news_age(self) -> dict[ChunkId, float]:
+        """Seconds since each group here last heard from its leader (0: this peer leads)."""
+        now = time.monotonic()
+        return {c: 0.0 if g.role is Role.LEADER else now - g.heard for c, g in self._groups.items()}
 
     def promotable(self, chunk: ChunkId) -> frozenset[int]:
         """The node ids of the learners `voters.next_change` may promote: caught up

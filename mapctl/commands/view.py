@@ -22,17 +22,28 @@ def view() -> None:
 @view.command("open")
 @click.option("--at", "at", type=int, help="Begin at this past logical time instead of now.")
 @click.option("--serializable", is_flag=True, help="Also validate what the view reads.")
+@click.option(
+    "--stale",
+    is_flag=True,
+    help="Read this peer's replicas as they are, asking no leader (works offline).",
+)
 @json_option
 @pass_session
-def view_open(session: Session, at: int | None, serializable: bool, as_json: bool) -> None:
+def view_open(
+    session: Session, at: int | None, serializable: bool, stale: bool, as_json: bool
+) -> None:
     """Begin a view: later reads see the map as of its begin time."""
     from mapctl import render
 
-    opened = session.call("view_open", view=session.view, at=at, serializable=serializable)
+    opened = session.call(
+        "view_open", view=session.view, at=at, serializable=serializable, stale=stale
+    )
     if as_json:
         render.emit_json(opened)
-    else:
-        render.line(f"view {opened['name']} open at time {opened['begin_time']}")
+        return
+    render.line(f"view {opened['name']} open at time {opened['begin_time']}")
+    if stale:
+        render.line(render.staleness(opened["replicas"]))
 
 
 @view.command("abort")

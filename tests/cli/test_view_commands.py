@@ -228,6 +228,7 @@ class TestViews:
             "name": "main",
             "begin_time": 0,
             "isolation": "snapshot",
+            "stale": False,
             "staged": 1,
             "conflicts": 0,
         }
@@ -248,9 +249,27 @@ class TestViews:
             "name": "s",
             "begin_time": 0,
             "isolation": "serializable",
+            "stale": False,
             "staged": 0,
             "conflicts": 0,
         }
+
+    def test_a_stale_view_reads_and_commits_offline_and_says_so(self, points: Mapctl) -> None:
+        item = points.insert({"v": 1})
+        time = points.commit()["time"]
+        opened = points.json("view", "open", "--stale", view="here")
+        assert opened["stale"] is True
+        assert opened["begin_time"] == time
+        assert opened["replicas"] == {"time": time, "leaders_silent_s": None}  # no swarm
+        assert points.json("get", "pts", item, view="here") == {"v": 1.0}
+        points("set", "pts", item, '{"v": 2}', view="here")
+        assert points.json("commit", view="here")["time"] > time
+        assert "in no swarm" in points("view", "open", "--stale", view="again")
+
+    def test_a_stale_view_at_a_past_time_is_refused(self, points: Mapctl) -> None:
+        result = points.invoke("view", "open", "--stale", "--at", "0")
+        assert isinstance(result.exception, UsageError)
+        assert "no --at" in str(result.exception)
 
     def test_open_at_a_past_time_reads_the_past(self, points: Mapctl) -> None:
         item = points.insert({"v": 1})

@@ -23,6 +23,7 @@ from mapapi.core.ids import ChunkId, ItemId
 from mapapi.lookup.dht.ring import chunk_key
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
+from mapapi.service.stale import staleness
 from mapapi.swarm.liveness import LivenessOptions
 from mapapi.swarm.raft_wire import node_id
 from mapapi.swarm.replication import encode_holder
@@ -261,3 +262,33 @@ class TestRace:
         assert acknowledged >= 1
         await assert_one_history(peers, item, await value(a, item))
         assert len(a.history(item)) == 1 + acknowledged  # the insert, then each winner
+
+
+class TestStaleViews:
+    async def test_a_stale_view_reads_its_replica_with_no_leader_and_says_how_old(
+        self, start: Start, make_repo: Callable[..., Repository]
+    ) -> None:
+        peers, _, chunk, item = await holders_of(start, make_repo, 3)
+        await add_one(peers[0], item)
+        leader = await leader_among(peers, chunk)
+        alone = next(p for p in peers if p is not leader)
+        assert await value(alone, item) == 1  # its replica has the commit
+        gone = [p for p in peers if p is not alone]
+        for peer in gone:
+            await crash(peer)
+        await until(lambda: not any(net(alone).liveness.answers(p.id) for p in gone))
+
+        view = alone.begin(stale=True)
+        current = await view.get(TABLE, item)
+        age = staleness(alone)
+
+        assert current is not None
+        assert current.value == 1
+        assert view.begin_time == alone.store.clock()
+        assert age.time == alone.store.clock()
+        assert age.silent_s is not None
+        assert age.silent_s > 0  # its leader is gone: it says how long it has been silent
+        view.update(TABLE, item, Counter(name=current.name, value=2))
+        with pytest.raises(NoQuorum):  # a commit still needs the chunk's voters
+            await view.commit("offline")
+        assert await alone.begin(stale=True).get(TABLE, item) == current  # nothing changed

@@ -102,7 +102,7 @@ class Scope(_message.Message):
     def __init__(self, table: _Optional[str] = ..., chunk: _Optional[bytes] = ...) -> None: ...
 
 class ViewState(_message.Message):
-    __slots__ = ("name", "begin_time", "isolation", "changes", "conflicts", "read_set", "scopes")
+    __slots__ = ("name", "begin_time", "isolation", "changes", "conflicts", "read_set", "scopes", "stale")
     NAME_FIELD_NUMBER: _ClassVar[int]
     BEGIN_TIME_FIELD_NUMBER: _ClassVar[int]
     ISOLATION_FIELD_NUMBER: _ClassVar[int]
@@ -110,6 +110,7 @@ class ViewState(_message.Message):
     CONFLICTS_FIELD_NUMBER: _ClassVar[int]
     READ_SET_FIELD_NUMBER: _ClassVar[int]
     SCOPES_FIELD_NUMBER: _ClassVar[int]
+    STALE_FIELD_NUMBER: _ClassVar[int]
     name: str
     begin_time: int
     isolation: str
@@ -117,7 +118,8 @@ class ViewState(_message.Message):
     conflicts: _containers.RepeatedCompositeFieldContainer[Conflict]
     read_set: _containers.RepeatedScalarFieldContainer[bytes]
     scopes: _containers.RepeatedCompositeFieldContainer[Scope]
-    def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ...) -> None: ...
+    stale: bool
+    def __init__(self, name: _Optional[str] = ..., begin_time: _Optional[int] = ..., isolation: _Optional[str] = ..., changes: _Optional[_Iterable[_Union[Change, _Mapping]]] = ..., conflicts: _Optional[_Iterable[_Union[Conflict, _Mapping]]] = ..., read_set: _Optional[_Iterable[bytes]] = ..., scopes: _Optional[_Iterable[_Union[Scope, _Mapping]]] = ..., stale: _Optional[bool] = ...) -> None: ...
 
 class CommitProposal(_message.Message):
     __slots__ = ("commit_id", "time", "author", "author_name", "view", "message", "begin_time", "isolation", "changes", "since", "read_set", "scopes", "participants")
