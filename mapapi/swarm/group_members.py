@@ -9,6 +9,17 @@ member that does not lead answers with the leader to ask), lets
 this peer join a chunk's group from any member's address and wait until the
 leader's snapshot or log brought its replica up to the change, leave one, and,
 as the leader, removes members that liveness has declared dead for a while.
+
+A member removed while it was away (dead to the others for `remove_after`)
+hears nothing from its group any more, and its own messages are dropped: only
+members speak. So a peer whose group has known no leader for `STUCK_AFTER`
+asks to join again, through a member that answers (`rejoin_stuck`). The leader
+answers a member with nothing new, and takes one it had removed in again as a
+learner (`GroupChanged.added`); either way the peer now hears the members the
+answer names, the leader among them (it may have missed the change that added
+that leader). It keeps its log: the leader probes it as any lagging follower's,
+and Raft's log matching replaces an uncommitted tail (wiping it instead would
+let the leader believe the peer holds entries it dropped).
 """
 
 from __future__ import annotations
@@ -18,7 +29,7 @@ import contextlib
 import logging
 from collections.abc import Callable, Iterable
 
-from mapapi.core.errors import CorruptRepoError, NotChunkLeader, RequestTimeout
+from mapapi.core.errors import CorruptRepoError, MapError, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
@@ -36,6 +47,9 @@ log = logging.getLogger(__name__)
 CATCH_UP_WAIT = 2.0
 """Seconds a membership change waits for a learner to catch up before it leaves its
 promotion to a later round (`GroupMembers.reap`)."""
+STUCK_AFTER = 5.0
+"""Seconds a group here may know no leader before this peer asks whether it is
+still a member (`GroupMembers.rejoin_stuck`)."""
 PROBE_TIMEOUT = 2.0
 """Seconds a joiner has to answer the leader's ping before it is taken in."""
 ELECTION_PAUSE = 0.05
@@ -145,6 +159,7 @@ class GroupMembers:
         self.remove_after = remove_after
         self._dead_since: dict[PeerId, float] = {}
         self._changing: dict[ChunkId, asyncio.Lock] = {}  # one membership change at a time
+        self._leaderless: dict[ChunkId, float] = {}  # since when a group here knows none
         rpc.register(GroupJoin, self.rpc_group_join)
         rpc.register(GroupLeave, self.rpc_group_leave)
 
@@ -242,11 +257,46 @@ class GroupMembers:
         async with self._changing.setdefault(chunk, asyncio.Lock()):
             # from the configuration, not the members this peer can name: a member
             # that said goodbye (stopped) is still one, until it leaves or dies
-            wanted = set(groups.config(chunk).members) | ({node_id(add)} if add else set())
+            before = groups.config(chunk).members
+            wanted = set(before) | ({node_id(add)} if add else set())
             wanted -= {node_id(drop)} if drop else set()
             config = await change_nodes(groups, chunk, wanted, self.factor)
         members = tuple(sorted(groups.mail.peers(config.members)))
-        return GroupChanged(groups.applied(chunk), members)
+        added = add is not None and node_id(add) not in before
+        return GroupChanged(groups.applied(chunk), members, added=added)
+
+    async def rejoin_stuck(self, answers: Callable[[PeerId], bool], now: float) -> list[ChunkId]:
+        """Ask to join again each group here that has known no leader for
+        `STUCK_AFTER` seconds (by `now`, monotonic), through a member `answers`
+        says answers (see the module docstring); the chunks joined again."""
+        back: list[ChunkId] = []
+        for chunk in self.groups.store.chunk_ids():
+            if self.groups.leader(chunk) is not None:
+                self._leaderless.pop(chunk, None)
+                continue
+            if now - self._leaderless.setdefault(chunk, now) < STUCK_AFTER:
+                continue
+            self._leaderless[chunk] = now  # one try per STUCK_AFTER
+            with contextlib.suppress(NotChunkLeader):  # no group here (yet)
+                if await self._rejoin(chunk, answers):
+                    back.append(chunk)
+        return back
+
+    async def _rejoin(self, chunk: ChunkId, answers: Callable[[PeerId], bool]) -> bool:
+        """Ask members that answer, one after the other, until one takes this peer's
+        request to the leader; whether the leader had removed it (it starts over)."""
+        for member in [p for p in self.groups.members(chunk) if answers(p)]:
+            try:
+                async with asyncio.timeout(PROBE_TIMEOUT):
+                    changed = await self._ask(member, GroupJoin(chunk))
+            except (MapError, TimeoutError) as exc:
+                log.debug("chunk %s: %s did not take us in: %s", chunk.short, member.short, exc)
+                continue
+            self.groups.trust(chunk, changed.members)  # the leader among them
+            if changed.added:
+                log.warning("chunk %s: removed while away, taken in again", chunk.short)
+            return changed.added
+        return False
 
     async def reap(self, is_dead: Callable[[PeerId], bool], now: float) -> list[PeerId]:
         """As the leader of each chunk, remove the members `is_dead` has said are dead

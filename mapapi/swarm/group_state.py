@@ -56,6 +56,7 @@ class GroupState:
     reads: dict[bytes, asyncio.Future[int]] = field(default_factory=dict)  # ReadIndex waits
     members: frozenset[int] = frozenset()  # the configuration last reported (`on_members`)
     heard: float = field(default_factory=time.monotonic)  # when its leader last spoke here
+    trusted: frozenset[int] = frozenset()  # members named by the leader (`GroupMembers`)
 
     def settle(self, entries: tuple[Entry, ...], results: dict[int, Applied]) -> None:
         """Answer the proposals of these applied entries: with what applying did,
@@ -207,9 +208,9 @@ def step_batch(
     Only a member of a group, as this peer's configuration knows it, speaks in it:
     Raft trusts its members, and a stranger's append with a higher term would
     otherwise write its entries into the chunk. A peer that has joined and knows
-    no configuration yet hears anyone (its leader is not known to it). The cost: a
-    member that missed the change that added the current leader drops the
-    leader's messages until it joins again.
+    no configuration yet hears anyone (its leader is not known to it), and one
+    that asked to join again hears the members the leader's answer named
+    (`trusted`): it may have missed the change that added the current leader.
     """
     node = node_id(sender)
     touched: dict[ChunkId, GroupState] = {}
@@ -221,7 +222,7 @@ def step_batch(
             log.warning("refused a raft message of node %d from %s", wire.sender, sender)
             continue
         members = group.node.config.members
-        if members and node not in members:
+        if members and node not in members and node not in group.trusted:
             log.debug("chunk %s: no member sent %s", wire.chunk.short, sender.short)
             continue
         try:

@@ -67,10 +67,8 @@ class RaftGroups:
     """Every Raft group of this peer (see the module docstring).
 
     Args:
-        me: this peer.
-        store: where each group's state and log persist.
-        rpc: sends and receives `RaftBatch` notifications (registered here).
-        address: where a peer is reached now.
+        me, store, rpc, address: this peer; where each group's state and log persist;
+            sends and receives `RaftBatch`es; where a peer is reached now.
         apply: applies a committed entry's effect to the store (any thread);
             `on_applied` is told on the loop what it did.
         peers: every peer a node id may stand for (the member list), to map ids back.
@@ -78,8 +76,7 @@ class RaftGroups:
         on_change: called after each Ready round that changed a role, a leader or sent.
         states: takes and installs chunks' states as snapshots (without it, logs
             are never compacted); `compact_after` entries past the last one.
-        on_members: called with a group's members (the peers it can name) each
-            time a configuration change takes effect here.
+        on_members: told a group's members (those it can name) at each change here.
         alive: the peer-level failure detector; with it idle groups go quiet.
     """
 
@@ -165,6 +162,10 @@ class RaftGroups:
         self.store.raft_save(chunk, hard=(0, NONE, 0))
         self._open(chunk, PersistentState(), applied=0)
 
+    def trust(self, chunk: ChunkId, members: Iterable[PeerId]) -> None:
+        """Hear these peers in the chunk's group (its members, as its leader just said)."""
+        self._group(chunk).trusted = frozenset(node_id(p) for p in members)
+
     def _open(self, chunk: ChunkId, state: PersistentState, applied: int) -> None:
         node = RaftNode(
             node_id(self.me),
@@ -201,8 +202,7 @@ class RaftGroups:
         return {c: 0.0 if g.role is Role.LEADER else now - g.heard for c, g in self._groups.items()}
 
     def promotable(self, chunk: ChunkId) -> frozenset[int]:
-        """The node ids of the learners `voters.next_change` may promote: caught up
-        with the log, as this peer knows it leading the group (none otherwise)."""
+        """The learners `voters.next_change` may promote: caught up, as the leader knows."""
         return self._group(chunk).node.caught_up_learners()
 
     def member_back(self, peer: PeerId) -> None:

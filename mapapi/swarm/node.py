@@ -2,14 +2,13 @@
 each chunk it holds (DESIGN §13), replication and its node on the Chord ring (the
 lookup index).
 
-It owns the RPC endpoint and every task behind it; `Peer.start()` creates it
-and `Peer.close()` closes it. Membership is simple: a joiner says Hello to any
-member, learns every member from the Welcome, and says Hello to each of them;
-a graceful leave says Bye to all (DESIGN §6). Every peer is also a node of
-the Chord ring over the same endpoint (DESIGN §7): it joins the ring with the
-swarm and hands its keys over when it leaves. It compares the hash chains of
-the chunks it shares with their other holders (`ChainWatch`, issue 18 §3) now
-and then, and at once after a rejoin.
+It owns the RPC endpoint and every task behind it; `Peer.start()` creates it and `Peer.close()`
+closes it. Membership is simple: a joiner says Hello to any member, learns every member from
+the Welcome, and says Hello to each of them; a graceful leave says Bye to all (DESIGN §6).
+Every peer is also a node of the Chord ring over the same endpoint (DESIGN §7): it joins the
+ring with the swarm and hands its keys over when it leaves. It compares the hash chains of the
+chunks it shares with their other holders (`ChainWatch`, issue 18 §3) now and then, and at
+once after a rejoin.
 """
 
 from __future__ import annotations
@@ -191,12 +190,13 @@ class Swarm:
         self.groups.found(chunk, holders if self._peer_id in holders else [self._peer_id])
 
     async def _reap(self, every: float) -> None:
-        """Now and then, as the leader of each chunk, remove members dead for a while
-        and keep the voters odd (`GroupMembers.reap`)."""
+        """Now and then: as a chunk's leader, remove members dead for a while and keep
+        the voters odd; as a member long without leader, ask to be one (`GroupMembers`)."""
         while True:
             await asyncio.sleep(every)
             now = asyncio.get_running_loop().time()
             await self.group_members.reap(self.liveness.is_dead, now)
+            await self.group_members.rejoin_stuck(self.liveness.answers, now)
 
     @property
     def address(self) -> str:

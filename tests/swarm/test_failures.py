@@ -208,6 +208,27 @@ class TestRestart:
         await add_one_retrying(back, item)
         await assert_one_history(everyone, item, 5)
 
+    async def test_a_member_removed_while_away_joins_again_and_catches_up(
+        self, start: Start, make_repo: Callable[..., Repository]
+    ) -> None:
+        peers, repos, chunk, item = await holders_of(start, make_repo, 3)
+        await add_one(peers[2], item)
+        away = peers[2]
+        await crash(away)
+        living = peers[:2]
+        # the leader removes it after FAST.remove_after of being dead, through the log
+        await until(lambda: all(away.id not in p.holders(chunk) for p in living), RECOVERY)
+        await add_one_retrying(peers[0], item)
+        back = await start(repos[2], peers[0].address)  # its group still counts it in
+
+        # it knows no leader (the others drop its messages), asks, is taken in again
+        everyone = [*living, back]
+        await until(lambda: all(back.id in p.holders(chunk) for p in everyone), RECOVERY)
+        await until(lambda: net(back).groups.leader(chunk) is not None, RECOVERY)
+        assert await value(back, item) == 2  # its state was reinstalled
+        await add_one_retrying(back, item)
+        await assert_one_history(everyone, item, 3)
+
     async def test_a_holder_that_restarted_is_asked_where_it_serves_now(
         self, start: Start, make_repo: Callable[..., Repository]
     ) -> None:

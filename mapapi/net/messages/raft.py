@@ -103,11 +103,12 @@ class GroupLeave:
 class GroupChanged:
     """The group's members after the change, and the log index that made them so;
     from a member that does not lead, index 0 and the `leader` to ask (None: an
-    election runs)."""
+    election runs). `added`: the joiner was no member before (it starts over)."""
 
     index: int
     members: tuple[PeerId, ...] = ()
     leader: PeerId | None = None
+    added: bool = False
 
 
 BODIES: dict[str, type] = {

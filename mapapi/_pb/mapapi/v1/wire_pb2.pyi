@@ -431,11 +431,13 @@ class GroupLeave(_message.Message):
     def __init__(self, chunk: _Optional[bytes] = ...) -> None: ...
 
 class GroupChanged(_message.Message):
-    __slots__ = ("index", "members", "leader")
+    __slots__ = ("index", "members", "leader", "added")
     INDEX_FIELD_NUMBER: _ClassVar[int]
     MEMBERS_FIELD_NUMBER: _ClassVar[int]
     LEADER_FIELD_NUMBER: _ClassVar[int]
+    ADDED_FIELD_NUMBER: _ClassVar[int]
     index: int
     members: _containers.RepeatedScalarFieldContainer[bytes]
     leader: bytes
-    def __init__(self, index: _Optional[int] = ..., members: _Optional[_Iterable[bytes]] = ..., leader: _Optional[bytes] = ...) -> None: ...
+    added: bool
+    def __init__(self, index: _Optional[int] = ..., members: _Optional[_Iterable[bytes]] = ..., leader: _Optional[bytes] = ..., added: _Optional[bool] = ...) -> None: ...
