@@ -191,6 +191,25 @@ class TestMembers:
         await add_one(learner, item)
         await assert_one_history(living, item, 1)
 
+    async def test_a_member_that_left_and_stays_away_loses_its_place(
+        self, start: Start, make_repo: Callable[..., Repository]
+    ) -> None:
+        peers, _, chunk, item = await holders_of(start, make_repo, 4)  # 3 voters, 1 learner
+        leader = await leader_among(peers, chunk)
+        (learner,) = [
+            p for p in peers if node_id(p.id) in net(leader).groups.config(chunk).learners
+        ]
+        left = next(p for p in peers if p not in (leader, learner))
+        await left.close()  # a goodbye keeps it a member, until silent long enough
+        living = [p for p in peers if p is not left]
+        assert left.id in leader.holders(chunk)
+
+        await until(lambda: all(left.id not in p.holders(chunk) for p in living), RECOVERY)
+        voting = {node_id(p.id) for p in living}  # the learner takes its vote
+        await until(lambda: net(leader).groups.config(chunk).voters == voting, RECOVERY)
+        await add_one(learner, item)
+        await assert_one_history(living, item, 1)
+
 
 class TestRestart:
     async def test_a_restarted_peer_rejoins_its_groups_and_catches_up(
