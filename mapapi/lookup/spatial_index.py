@@ -25,7 +25,7 @@ from mapapi._pb.mapapi.v1 import lookup_pb2, maps_pb2
 from mapapi.core.errors import QueryError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox, SpatialGrid
-from mapapi.net.rpc import ask_all
+from mapapi.net.asking import ask_all
 
 if TYPE_CHECKING:
     from mapapi.lookup.dht.chord import ChordNode

@@ -1,15 +1,12 @@
 """Requests with deadlines and concurrent handlers, over a `Transport`.
 
-`request()` files a future under a fresh request id, sends, and awaits the reply
-under `asyncio.timeout`; the transport's reader resolves the future. Handlers are
-registered per body type. An `async def` handler runs as its own task (kept in a
-set, cancelled on close), so one that waits for a lock never blocks the reader;
-a plain function runs inline in the reader, which saves a task per message for
-answers that need no waiting (DESIGN §12: avoid a task per message).
-
-A handler raising `MapError` answers `ErrorReply(code, message)`, which the
-requester raises again as the same class (STYLE §4); any other exception is
-logged and answered with a generic `MapError`.
+`request()` files a future under a fresh request id, sends, and awaits the reply under
+`asyncio.timeout`; the transport's reader resolves the future. Handlers are registered per
+body type. An `async def` handler runs as its own task (kept in a set, cancelled on close), so
+one that waits for a lock never blocks the reader; a plain function runs inline in the reader,
+which saves a task per message for answers that need no waiting (DESIGN §12). A handler raising
+`MapError` answers `ErrorReply(code, message)`, which the requester raises again as the same
+class (STYLE §4); any other exception is logged and answered with a generic `MapError`.
 """
 
 from __future__ import annotations
@@ -18,9 +15,9 @@ import asyncio
 import inspect
 import itertools
 import logging
-from collections.abc import Awaitable, Callable, Hashable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Generic, TypeVar, overload
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+from typing import Any, TypeVar, overload
 
 from mapapi.core.errors import (
     AccessRefused,
@@ -69,8 +66,7 @@ class Rpc:
     Args:
         transport: the message transport (e.g. `ZmqTransport`), not yet started.
         default_timeout: deadline in seconds for `request()` without `timeout`.
-        on_seen: called with the sender of every message that arrives (the
-            swarm's proof of life for its failure detector).
+        on_seen: told the sender of every message that arrives (proof of life).
     """
 
     def __init__(
@@ -84,13 +80,13 @@ class Rpc:
         self.default_timeout = default_timeout
         self._handlers: dict[type, Handler] = {}
         self._pending: dict[int, tuple[str, asyncio.Future[object]]] = {}
+        self._from: dict[int, PeerId] = {}  # requests whose reply must come from this peer
         self._tasks: set[asyncio.Task[object]] = set()
         self._ids = itertools.count(1)
         self._closed = False
         self.on_seen = on_seen
-        # Addresses of peers declared dead (`mapapi.swarm.liveness`), each with who
-        # answers there ("peer robot2 (146ca670)"): requests to them fail at once
-        # instead of waiting out their deadlines, probes excepted.
+        # Addresses of peers declared dead (`swarm/liveness.py`), with who answers there
+        # ("peer robot2 (146ca670)"): requests to them fail at once, probes excepted.
         self.down: dict[str, str] = {}
         transport.set_sink(self)
 
@@ -134,6 +130,7 @@ class Rpc:
         timeout: float | None = ...,  # noqa: ASYNC109
         expect: type[T],
         probe: bool = ...,
+        sender: PeerId | None = ...,
     ) -> T: ...
 
     @overload
@@ -145,6 +142,7 @@ class Rpc:
         timeout: float | None = ...,  # noqa: ASYNC109
         expect: None = ...,
         probe: bool = ...,
+        sender: PeerId | None = ...,
     ) -> object: ...
 
     async def request(
@@ -157,6 +155,7 @@ class Rpc:
         timeout: float | None = None,  # noqa: ASYNC109
         expect: type[Any] | None = None,
         probe: bool = False,
+        sender: PeerId | None = None,
     ) -> object:
         """Send `body` to the peer at `address` and return its reply body.
 
@@ -166,6 +165,7 @@ class Rpc:
             timeout: seconds to wait; `default_timeout` if None.
             expect: the reply body type; anything else raises ProtocolError.
             probe: send even to an address in `down` (a heartbeat).
+            sender: the peer that must answer (another at the address: ProtocolError).
 
         Raises:
             RequestTimeout: no reply before the deadline (retriable).
@@ -183,6 +183,8 @@ class Rpc:
         request_id = next(self._ids)
         fut: asyncio.Future[object] = asyncio.get_running_loop().create_future()
         self._pending[request_id] = (address, fut)
+        if sender is not None:
+            self._from[request_id] = sender
         try:
             async with asyncio.timeout(deadline):
                 self.transport.send(address, Kind.REQUEST, request_id, body)
@@ -194,6 +196,7 @@ class Rpc:
             ) from None
         finally:
             self._pending.pop(request_id, None)
+            self._from.pop(request_id, None)
         if isinstance(reply, ErrorReply):
             raise codec.error_from_reply(reply)
         if expect is not None and not isinstance(reply, expect):
@@ -256,6 +259,11 @@ class Rpc:
             if entry is None or entry[0] != msg.address or entry[1].done():
                 # late (after its deadline) or not ours
                 self.transport.stats.record_dropped(str(msg.address), "unmatched", msg.size)
+                return
+            want = self._from.get(env.request_id)
+            if want is not None and env.sender != want:
+                who = f"{msg.address} answered as peer {env.sender.short}, not {want.short}"
+                entry[1].set_exception(ProtocolError(who))
                 return
             entry[1].set_result(env.body)
             return
@@ -330,71 +338,3 @@ class Rpc:
             log.error("handler for %s returned %r, not a message body", env.body_name, result)
             why = f"internal error handling {env.body_name}: bad reply type"
             self.transport.reply(msg.route, env.request_id, ErrorReply(MapError.code, why))
-
-
-async def first_answer(
-    calls: Sequence[Awaitable[T]], accept: Callable[[T], bool] = lambda _answer: True
-) -> T | None:
-    """The first answer of `calls` (requests run at once) that `accept` takes; the
-    others are cancelled. A call that fails with a MapError counts as no answer;
-    None if no call gave one."""
-    pending = [asyncio.ensure_future(call) for call in calls]
-    try:
-        for next_done in asyncio.as_completed(pending):
-            try:
-                answer = await next_done
-            except MapError:
-                continue
-            if accept(answer):
-                return answer
-        return None
-    finally:
-        for fut in pending:
-            fut.cancel()
-        await asyncio.gather(*pending, return_exceptions=True)
-
-
-@dataclass(frozen=True, slots=True)
-class Answers(Generic[K, T]):
-    """What `ask_all` gathered, by key, in the order the calls were given.
-
-    Attributes:
-        ok: the answers of the calls that succeeded.
-        failed: the MapError of each call that failed (a peer that did not answer,
-            or refused).
-    """
-
-    ok: dict[K, T] = field(default_factory=dict)
-    failed: dict[K, MapError] = field(default_factory=dict)
-
-    def raise_first(self) -> None:
-        """Raise the first failure, in the order the calls were given, if any.
-
-        Raises:
-            MapError: that failure.
-        """
-        for error in self.failed.values():
-            raise error
-
-
-async def ask_all(calls: Mapping[K, Awaitable[T]]) -> Answers[K, T]:
-    """Run `calls` (requests to several peers, say, keyed by peer) at once and
-    wait for every one; a call failing with a MapError does not stop the others.
-    The caller then raises the first failure (`Answers.raise_first`) or logs them.
-    Give each call its own key: a dict comprehension repeating one drops a call unawaited.
-
-    Raises:
-        Exception: the first failure that is no MapError (a bug), once every call
-            has finished; cancelling `ask_all` cancels the calls.
-    """
-    keys = list(calls)
-    results = await asyncio.gather(*calls.values(), return_exceptions=True)
-    answers: Answers[K, T] = Answers()
-    for key, result in zip(keys, results, strict=True):
-        if isinstance(result, MapError):
-            answers.failed[key] = result
-        elif isinstance(result, BaseException):
-            raise result
-        else:
-            answers.ok[key] = result
-    return answers

@@ -49,9 +49,10 @@ from mapapi.core.errors import (
     UsageError,
 )
 from mapapi.core.ids import PeerId
+from mapapi.net.asking import ask_all
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import ChunkList, ChunkListQuery, ChunkSummary, ControlCall, ControlResult
-from mapapi.net.rpc import Request, Rpc, ask_all
+from mapapi.net.rpc import Request, Rpc
 from mapapi.net.transport import ZmqTransport
 
 if TYPE_CHECKING:

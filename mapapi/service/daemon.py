@@ -113,8 +113,8 @@ async def _first_to_answer(peer: Peer, seeds: Sequence[str]) -> list[str]:
     All are pinged at once: remembered members that since stopped, or restarted on
     other ports, would otherwise each cost a join's whole timeout in turn.
     """
+    from mapapi.net.asking import first_answer
     from mapapi.net.codec import Ping, Pong
-    from mapapi.net.rpc import first_answer
 
     assert peer.swarm is not None
     rpc = peer.swarm.rpc

@@ -25,8 +25,9 @@ from collections.abc import Callable, Iterable, Sequence
 
 from mapapi.core.errors import MapError, NotParticipatingError
 from mapapi.core.ids import ChunkId, PeerId
+from mapapi.net.asking import ask_all
 from mapapi.net.messages import ChainHead
-from mapapi.net.rpc import Request, Rpc, ask_all
+from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import Divergence, ReplicaStore
 
 log = logging.getLogger(__name__)

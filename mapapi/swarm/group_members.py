@@ -249,9 +249,11 @@ class GroupMembers:
             return GroupChanged(0, (), groups.leader(chunk))  # ask the leader
         if add is not None and add not in groups.members(chunk):
             await refuse_to_hand_on(groups.store, chunk, groups.me)
-            # A joiner must be reachable where the swarm knows it: a stranger (or an
-            # address that does not answer) taken in as a voter would cost the quorum.
-            await self.rpc.request(self._address(add), Ping(), timeout=PROBE_TIMEOUT, expect=Pong)
+            # A joiner must be reachable where the swarm knows it, and be the one that
+            # answers there: a stranger (or one claiming another peer's address, as an
+            # open swarm's hostile host may) taken in would cost the quorum.
+            address = self._address(add)
+            await self.rpc.request(address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong, sender=add)
         # One change of a chunk's members at a time, each from the members then: two
         # joins computed side by side would each take the other out again.
         async with self._changing.setdefault(chunk, asyncio.Lock()):

@@ -29,9 +29,10 @@ from mapapi.lookup.chunk_places import ChunkPlaces
 from mapapi.lookup.dht.chord import ChordNode
 from mapapi.lookup.spatial import SpatialGrid
 from mapapi.lookup.spatial_index import SpatialIndex
+from mapapi.net.asking import ask_all
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import Ack, Bye, Hello, Member, Welcome
-from mapapi.net.rpc import Request, Rpc, ask_all
+from mapapi.net.rpc import Request, Rpc
 from mapapi.net.security import Security, own_address
 from mapapi.net.shaping import Shaper
 from mapapi.net.transport import ZmqTransport
@@ -68,8 +69,7 @@ class ChordOptions:
     Attributes:
         stabilize, fix_fingers, check_predecessor: periods of the ring's repair tasks.
         timeout: deadline of each request to another node.
-        holder_ttl: lifetime of a holder registration and of a chunk's box in the
-            spatial index; each is refreshed every third of it.
+        holder_ttl: life of a holder registration and a chunk's box (refreshed at 1/3).
         successors: successor list length (also the number of copies of a key).
     """
 

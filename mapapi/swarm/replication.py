@@ -23,6 +23,7 @@ from mapapi.core.errors import ChunkNotFound, MapError, NoPeersError, UsageError
 from mapapi.core.ids import ChunkId, ItemId, PeerId
 from mapapi.lookup.dht.announce import Announcements, Entry
 from mapapi.lookup.dht.ring import chunk_key
+from mapapi.net.asking import first_answer
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import (
     ChunkList,
@@ -32,7 +33,7 @@ from mapapi.net.messages import (
     HoldersQuery,
     Member,
 )
-from mapapi.net.rpc import Request, Rpc, first_answer
+from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm.group_members import GroupMembers
 from mapapi.swarm.groups import RaftGroups
@@ -176,7 +177,8 @@ class Replicator:
         if known is None or not known.address:
             self.members.add(holder)
         address = self.members.address(holder.id)
-        await self.rpc.request(address, Ping(), timeout=PROBE_TIMEOUT, expect=Pong)
+        ping = Ping()  # the holder itself must answer there
+        await self.rpc.request(address, ping, timeout=PROBE_TIMEOUT, expect=Pong, sender=holder.id)
         await self.group_members.join(chunk, via=holder.id)
 
     async def leave(self, chunk: ChunkId, force: bool = False) -> None:

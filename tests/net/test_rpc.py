@@ -32,6 +32,17 @@ class TestRequestResponse:
         assert await client.request(server.address, Ping(b"hi"), expect=Pong) == Pong(b"hi")
         assert client.pending == 0
 
+    async def test_a_reply_from_another_peer_than_named_is_refused(
+        self, pair: tuple[Rpc, Rpc]
+    ) -> None:
+        client, server = pair
+        real = server.transport.peer_id
+        assert await client.request(server.address, Ping(b"x"), expect=Pong, sender=real)
+        claimed = PeerId.new()  # a peer that says it is reached at the server's address
+        with pytest.raises(ProtocolError, match=f"answered as peer {real.short}, not"):
+            await client.request(server.address, Ping(b"y"), expect=Pong, sender=claimed)
+        assert client.pending == 0
+
     async def test_bound_address_is_real(self, pair: tuple[Rpc, Rpc]) -> None:
         _, server = pair
         assert server.address.startswith("tcp://127.0.0.1:")

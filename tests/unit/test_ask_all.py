@@ -7,7 +7,7 @@ import asyncio
 import pytest
 
 from mapapi.core.errors import LockTimeout, MapError, RequestTimeout
-from mapapi.net.rpc import ask_all
+from mapapi.net.asking import ask_all
 
 
 async def _answer(value: int) -> int:

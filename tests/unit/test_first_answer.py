@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 from mapapi.core.errors import RequestTimeout
-from mapapi.net.rpc import first_answer
+from mapapi.net.asking import first_answer
 
 
 async def _after(gate: asyncio.Event, value: int) -> int:

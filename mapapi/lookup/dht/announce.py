@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Generic, TypeVar
 
 from mapapi.core import limits
 from mapapi.core.errors import MapError, UsageError
-from mapapi.net.rpc import ask_all
+from mapapi.net.asking import ask_all
 
 if TYPE_CHECKING:
     from mapapi.lookup.dht.chord import ChordNode

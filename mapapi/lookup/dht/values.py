@@ -17,6 +17,7 @@ from mapapi.core import limits
 from mapapi.core.errors import NetworkError, ProtocolError
 from mapapi.lookup.dht import ring
 from mapapi.lookup.dht.ring_wire import Node, key_bytes, key_from
+from mapapi.net.asking import ask_all
 from mapapi.net.messages import (
     Ack,
     ChordAdd,
@@ -26,7 +27,7 @@ from mapapi.net.messages import (
     ChordStore,
     ChordValues,
 )
-from mapapi.net.rpc import Request, ask_all
+from mapapi.net.rpc import Request
 
 if TYPE_CHECKING:
     from mapapi.lookup.dht.chord import ChordNode
