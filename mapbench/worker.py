@@ -167,14 +167,14 @@ class Worker:
             for _ in range(n):
                 first = clock()
                 while True:
-                    tx = self.peer.begin()
-                    current = await tx.get(TABLE, item)
-                    if current is None:
-                        raise UsageError(f"no counter {item} here")
-                    value = int(current.value) + 1  # type: ignore[attr-defined]
-                    tx.update(TABLE, item, self.counter(name="a", value=value))
-                    attempt = clock()
-                    try:
+                    try:  # the whole attempt: a read may fail for a moment too (NoQuorum)
+                        tx = self.peer.begin()
+                        current = await tx.get(TABLE, item)
+                        if current is None:
+                            raise UsageError(f"no counter {item} here")
+                        value = int(current.value) + 1  # type: ignore[attr-defined]
+                        tx.update(TABLE, item, self.counter(name="a", value=value))
+                        attempt = clock()
                         await tx.commit(f"{self.peer.name} -> {value}")
                     except MapError as exc:
                         if not exc.retriable:
