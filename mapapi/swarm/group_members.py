@@ -286,19 +286,29 @@ class GroupMembers:
 
     async def _rejoin(self, chunk: ChunkId, answers: Callable[[PeerId], bool]) -> bool:
         """Ask members that answer, one after the other, until one takes this peer's
-        request to the leader; whether the leader had removed it (it starts over)."""
+        request to the leader; whether the leader had removed it (it is taken in again).
+        A member that knows no leader either is passed over at once: a group electing
+        one must not hold up this round of every other group's (`_reap`)."""
+        body = GroupJoin(chunk)
         for member in [p for p in self.groups.members(chunk) if answers(p)]:
             try:
-                async with asyncio.timeout(PROBE_TIMEOUT):
-                    changed = await self._ask(member, GroupJoin(chunk))
-            except (MapError, TimeoutError) as exc:
+                changed = await self._ask_once(member, body)
+                if not changed.index and changed.leader is not None:
+                    changed = await self._ask_once(changed.leader, body)
+            except MapError as exc:
                 log.debug("chunk %s: %s did not take us in: %s", chunk.short, member.short, exc)
+                continue
+            if not changed.index:
                 continue
             self.groups.trust(chunk, changed.members)  # the leader among them
             if changed.added:
                 log.warning("chunk %s: removed while away, taken in again", chunk.short)
             return changed.added
         return False
+
+    async def _ask_once(self, member: PeerId, body: GroupJoin) -> GroupChanged:
+        address = self._address(member)
+        return await self.rpc.request(address, body, timeout=PROBE_TIMEOUT, expect=GroupChanged)
 
     async def reap(self, is_dead: Callable[[PeerId], bool], now: float) -> list[PeerId]:
         """As the leader of each chunk, remove the members `is_dead` has said are dead
