@@ -1,12 +1,10 @@
 """Transactions: views at a begin time with optimistic commits (DESIGN §5).
 
-A `Transaction` reads the map as it was at its begin time, buffers its own
-changes (which its reads see), and commits them atomically through its
-backend. Validation itself is the pure function `core.validate.validate`: an updated or
-removed item conflicts if someone else wrote it after the begin time (or after
-this transaction's own earlier commit of it); an insert conflicts if the id
-exists; with `isolation="serializable"` the read set is validated too.
-"""
+A `Transaction` reads the map as it was at its begin time, buffers its own changes (which its
+reads see), and commits them atomically through its backend. Validation itself is the pure
+function `core.validate.validate`: an updated or removed item conflicts if someone else wrote
+it after the begin time (or after this transaction's own earlier commit of it); an insert
+conflicts if the id exists; with `isolation="serializable"` the read set is validated too."""
 
 from __future__ import annotations
 
@@ -226,6 +224,11 @@ class Transaction:
     async def items(self, table: str, chunk: ChunkId | None = None) -> dict[ItemId, Message]:
         """Every item of a table (or one of its chunks) this transaction sees."""
         descriptor = self._backend.table(table)
+        return {i: descriptor.decode(d) for i, d in (await self.payloads(table, chunk)).items()}
+
+    async def payloads(self, table: str, chunk: ChunkId | None = None) -> dict[ItemId, bytes]:
+        """`items`, still serialized, in id order (to decode many off the event loop)."""
+        self._backend.table(table)  # an unknown table: UsageError
         if chunk is not None and self._backend.chunk_table(chunk) != table:
             raise UsageError(f"chunk {chunk} does not belong to table {table!r}")
         self._scopes.add((table, chunk))
@@ -246,7 +249,7 @@ class Transaction:
                 found.pop(item_id, None)
             else:
                 found[item_id] = data
-        return {i: descriptor.decode(d) for i, d in sorted(found.items())}
+        return dict(sorted(found.items()))
 
     async def find(
         self, table: str, field: str, value: Any, chunk: ChunkId | None = None

@@ -54,6 +54,7 @@ from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import ChunkList, ChunkListQuery, ChunkSummary, ControlCall, ControlResult
 from mapapi.net.rpc import Request, Rpc
 from mapapi.net.transport import ZmqTransport
+from mapapi.service.json_parts import dumps
 
 if TYPE_CHECKING:
     import zmq.asyncio
@@ -219,7 +220,7 @@ class ControlServer:
             raise PeerNotRunning("the peer is stopping; run the command again once it stopped")
         args = _decode_args(body.args_json)
         result = await self.ops.call(body.op, args)
-        return ControlResult(json.dumps(result))
+        return ControlResult(await asyncio.to_thread(dumps, result))  # in parts: json_parts
 
     async def close(self) -> None:
         """Stop serving and close the endpoint (an ipc socket file is removed)."""
