@@ -10,7 +10,7 @@ protobuf: the Chord index's values are `lookup.proto` messages that
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 from google.protobuf.message import DecodeError
@@ -248,15 +248,20 @@ PART_ITEMS = 2000
 """Rows of a chunk's state serialized in one call (about 300 KB)."""
 
 
-def encode_chunk_state(state: ChunkState) -> bytes:
+def encode_chunk_state(
+    state: ChunkState, revisions: Sequence[core_pb2.Revision] | None = None
+) -> bytes:
     """Serialize a chunk's whole state (a Raft snapshot's data), in parts of
     `PART_ITEMS` rows whose bytes are joined (`core/pb_parts.py`: no call holds
-    the interpreter lock for the whole chunk)."""
+    the interpreter lock for the whole chunk). `revisions`, when given, are the
+    state's revisions already as messages (`state.revisions` is then not read)."""
     head = core_pb2.ChunkSnapshot(table=state.table, type_name=state.type_name, time=state.time)
     out = [head.SerializeToString()]
-    for i in range(0, len(state.revisions), PART_ITEMS):
+    if revisions is None:
+        revisions = [revision_to_pb(r) for r in state.revisions]
+    for i in range(0, len(revisions), PART_ITEMS):
         m = core_pb2.ChunkSnapshot()
-        m.revisions.extend(revision_to_pb(r) for r in state.revisions[i : i + PART_ITEMS])
+        m.revisions.extend(revisions[i : i + PART_ITEMS])
         out.append(m.SerializeToString())
     for i in range(0, len(state.commits), PART_ITEMS):
         m = core_pb2.ChunkSnapshot()

@@ -25,6 +25,8 @@ class Id(str):
         Raises:
             ValueError: `value` is not 32 hex digits.
         """
+        if type(value) is str and _HEX32.fullmatch(value):  # the usual, canonical form
+            return str.__new__(cls, value)
         text = str(value).lower()
         if not _HEX32.fullmatch(text):
             raise ValueError(f"not a {cls.__name__}: {value!r} (expected 32 hex digits)")
@@ -41,7 +43,7 @@ class Id(str):
         """The id whose 16-byte big-endian form is `raw`."""
         if len(raw) != 16:
             raise ValueError(f"{cls.__name__} needs 16 bytes, got {len(raw)}")
-        return cls(raw.hex())
+        return str.__new__(cls, raw.hex())  # 32 lowercase hex digits by construction
 
     def to_bytes(self) -> bytes:
         """The 16-byte form used on the wire."""

@@ -119,6 +119,9 @@ class Operations:
                     raise ValueError(f"operation {name!r} is defined twice")
                 table[name] = operation
         self.table: Mapping[str, Operation] = MappingProxyType(table)
+        # Each call's arguments are checked against its operation's signature, worked
+        # out once here rather than by `inspect` on the event loop at every call.
+        self._signatures = {name: inspect.signature(op) for name, op in table.items()}
 
     async def call(self, op: str, args: dict[str, Json]) -> Json:
         """Run the operation called `op` with keyword `args` (JSON in, JSON out).
@@ -130,7 +133,7 @@ class Operations:
         if operation is None:
             raise UsageError(f"unknown operation {op!r}")
         try:
-            inspect.signature(operation).bind(**args)
+            self._signatures[op].bind(**args)
         except TypeError as exc:
             raise UsageError(f"bad arguments for {op!r}: {exc}") from exc
         try:
@@ -264,7 +267,7 @@ class RepoOperations:
 
     async def table_list(self) -> Json:
         """Tables with chunk and item counts."""
-        chunks = self.peer.chunks()
+        chunks = await self.peer.off_loop(self.peer.chunks)
         return {
             "tables": [
                 {
@@ -295,7 +298,7 @@ class RepoOperations:
                     "holders": self.peer.holders(c.id),
                     "roles": {str(p): r for p, r in self.peer.roles(c.id).items()},
                 }
-                for c in self.peer.chunks(table)
+                for c in await self.peer.off_loop(self.peer.chunks, table)
             ]
         return {"chunks": rows}
 
@@ -320,7 +323,8 @@ class RepoOperations:
                 rows.append({**row, "data": revision_json(peer, revision)})
             return rows[:limit] if limit else rows
         if table is not None:
-            chunks = {c.id for c in peer.chunks(table)}
+            peer.table(table)  # an unknown table is an error, not an empty log
+            chunks = set(peer.store.chunk_ids(table))
             records = [r for r in records if chunks & set(r.chunks)]
         return [commit_json(peer, r, seq[r.id]) for r in records[:limit]]
 

@@ -111,7 +111,7 @@ class SwarmOperations:
         (None: never heard from directly) and the chunks both peers hold."""
         peer = online(self.peer)
         now = time.monotonic()
-        held = [c.id for c in peer.chunks()]
+        held = peer.store.chunk_ids()
         rows = []
         for state in peer.members():
             member = state.member
@@ -155,7 +155,8 @@ class SwarmOperations:
             table = await peer.participate(chunk_id, report, again=True)
         finally:
             self._progress.pop(chunk, None)
-        items = next((c.items for c in await peer.off_loop(peer.chunks) if c.id == chunk_id), 0)
+        held = await peer.off_loop(peer.store.chunks, None, chunk_id)
+        items = held[0].items if held else 0
         return {
             "chunk": chunk_id,
             "table": table,
@@ -183,7 +184,8 @@ class SwarmOperations:
 
         peer = online(self.peer)
         found: dict[str, Json] = {
-            c.id: {"id": c.id, "table": c.table, "holders": [peer.id]} for c in peer.chunks()
+            c.id: {"id": c.id, "table": c.table, "holders": [peer.id]}
+            for c in await peer.off_loop(peer.chunks)
         }
         for member, chunks in (await ask_chunk_lists(peer)).items():
             for c in chunks:

@@ -7,6 +7,7 @@ from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
+from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 
@@ -118,8 +119,9 @@ class Store(Protocol):
     def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
         """Register a chunk of `table` (which must exist)."""
 
-    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
-        """The chunks held here, optionally of one table."""
+    def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
+        """The chunks held here, optionally of one table, or just `only` (counting a
+        chunk's items reads all its revisions: count only the ones asked about)."""
 
     def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
         """The ids of `chunks(table)`, in order, without counting their items
@@ -197,6 +199,9 @@ class ReplicaStore(Store, Protocol):
 
     def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
         """The full history of a chunk's items."""
+
+    def chunk_revisions_pb(self, chunk_id: ChunkId) -> list[core_pb2.Revision]:
+        """`chunk_revisions` as wire messages (what a Raft snapshot carries)."""
 
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """Records of the commits that wrote to a chunk, oldest first."""

@@ -7,7 +7,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 
-from mapapi.core import chain
+from mapapi._pb.mapapi.v1 import core_pb2
+from mapapi.core import chain, codec
 from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
@@ -71,8 +72,8 @@ class MemoryStore(MemoryChains):
                 raise UsageError(f"no table {table!r}")
             self._chunks.setdefault(chunk_id, table)
 
-    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
-        """The chunks, with their live item counts now."""
+    def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
+        """The chunks, with their live item counts now (`only`: just that one, if held)."""
         counts: dict[ChunkId, int] = dict.fromkeys(self._chunks, 0)
         for history in self._items.values():
             latest = history.latest()
@@ -81,7 +82,7 @@ class MemoryStore(MemoryChains):
         return [
             ChunkInfo(cid, t, counts[cid])
             for cid, t in sorted(self._chunks.items())
-            if table is None or t == table
+            if (table is None or t == table) and (only is None or cid == only)
         ]
 
     def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
@@ -222,6 +223,10 @@ class MemoryStore(MemoryChains):
         with self._lock:
             found = [r for h in self._items.values() for r in h.revisions if r.chunk_id == chunk_id]
         return sorted(found, key=lambda r: (r.item_id, r.update_time))
+
+    def chunk_revisions_pb(self, chunk_id: ChunkId) -> list[core_pb2.Revision]:
+        """`chunk_revisions` as wire messages (what a Raft snapshot carries)."""
+        return [codec.revision_to_pb(r) for r in self.chunk_revisions(chunk_id)]
 
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """Records of the commits that wrote to a chunk, oldest first."""

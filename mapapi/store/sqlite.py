@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core import chain
 from mapapi.core.errors import ChunkNotFound, CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
@@ -104,15 +105,15 @@ class SqliteStore(SqliteChains):
             except sqlite3.IntegrityError:
                 raise UsageError(f"no table {table!r}") from None
 
-    def chunks(self, table: str | None = None) -> list[ChunkInfo]:
-        """Chunks with their live item counts now."""
+    def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
+        """Chunks with their live item counts now (`only`: just that one, if held)."""
         sql = """
             SELECT c.id, c.table_name, COUNT(r.item_id) FROM chunks c
             LEFT JOIN revisions r ON r.chunk_id = c.id AND r.removed = 0
              AND r.update_time = (SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)
-            WHERE ? IS NULL OR c.table_name = ?
+            WHERE (? IS NULL OR c.table_name = ?) AND (? IS NULL OR c.id = ?)
             GROUP BY c.id ORDER BY c.id"""
-        rows = self._con().execute(sql, (table, table))
+        rows = self._con().execute(sql, (table, table, only, only))
         return [ChunkInfo(ChunkId(c), t, n) for c, t, n in rows]
 
     def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
@@ -210,25 +211,19 @@ class SqliteStore(SqliteChains):
     def _revision(self, row: sqlite3.Row | tuple) -> Revision:
         return sqlite_rows.revision(self.path, row)
 
-    def _record(self, row: tuple) -> CommitRecord:
-        return sqlite_rows.record(self.path, row)
-
     def commits(self, limit: int | None = None) -> list[CommitRecord]:
         """Newest first."""
         rows = self._con().execute(
             f"SELECT {_COMMIT_COLUMNS} FROM commits ORDER BY time DESC, id DESC LIMIT ?",
             (-1 if limit is None else limit,),
         )
-        return [self._record(r) for r in rows]
+        return [sqlite_rows.record(self.path, r) for r in rows]
 
     def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
         """One record."""
-        row = (
-            self._con()
-            .execute(f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id = ?", (commit_id,))
-            .fetchone()
-        )
-        return None if row is None else self._record(row)
+        sql = f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id = ?"
+        row = self._con().execute(sql, (commit_id,)).fetchone()
+        return None if row is None else sqlite_rows.record(self.path, row)
 
     def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
         """What one commit wrote."""
@@ -292,6 +287,10 @@ class SqliteStore(SqliteChains):
     def chunk_revisions(self, chunk_id: ChunkId) -> list[Revision]:
         """Every revision of every item of a chunk (its full history)."""
         return sqlite_replica.chunk_revisions(self.path, self._con(), chunk_id)
+
+    def chunk_revisions_pb(self, chunk_id: ChunkId) -> list[core_pb2.Revision]:
+        """`chunk_revisions` as wire messages, built straight from the rows."""
+        return sqlite_replica.chunk_revisions_pb(self.path, self._con(), chunk_id)
 
     def chunk_commits(self, chunk_id: ChunkId) -> list[CommitRecord]:
         """The records of every commit that wrote to a chunk, oldest first."""

@@ -7,6 +7,7 @@ import sqlite3
 from collections.abc import Sequence
 from pathlib import Path
 
+from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core.errors import CorruptRepoError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
@@ -32,6 +33,28 @@ def revision(path: Path, row: sqlite3.Row | tuple) -> Revision:
             bool(removed),
             PeerId(author),
             CommitId(commit),
+        )
+    except (TypeError, ValueError) as exc:
+        raise _damaged_row(path, "revision", exc) from exc
+
+
+def revision_pb(path: Path, row: tuple) -> core_pb2.Revision:
+    """The revision in a row of `REV_COLUMNS` as its wire message (`revision`, then
+    `codec.revision_to_pb`, in one step; a damaged row raises `CorruptRepoError`)."""
+    item_id, table, chunk, data, inserted, updated, removed, author, commit = row
+    try:
+        if not len(item_id) == len(chunk) == len(author) == len(commit) == 32:
+            raise ValueError("an id is not 32 hex digits")
+        return core_pb2.Revision(
+            item_id=bytes.fromhex(item_id),
+            table=table,
+            chunk_id=bytes.fromhex(chunk),
+            data=data,
+            insert_time=inserted,
+            update_time=updated,
+            removed=bool(removed),
+            author=bytes.fromhex(author),
+            commit_id=bytes.fromhex(commit),
         )
     except (TypeError, ValueError) as exc:
         raise _damaged_row(path, "revision", exc) from exc

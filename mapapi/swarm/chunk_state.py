@@ -35,10 +35,11 @@ class StoreStates:
                 table,
                 store.tables()[table],
                 store.raft_time(chunk),
-                tuple(store.chunk_revisions(chunk)),
+                (),  # given as messages below, read from the store without typed revisions
                 tuple(store.chunk_commits(chunk)),
                 txs,
-            )
+            ),
+            store.chunk_revisions_pb(chunk),
         )
 
     def install(self, chunk: ChunkId, data: bytes, index: int) -> None:

@@ -181,7 +181,7 @@ class GroupMembers:
         """
         joined = self.groups.store.raft_applied_index(chunk) is None
         if joined:
-            self.groups.join(chunk)
+            await self.groups.join(chunk)
         try:
             async with asyncio.timeout(timeout):
                 changed = await self._ask(via, GroupJoin(chunk))

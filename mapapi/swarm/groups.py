@@ -1,14 +1,14 @@
 """The multi-Raft shell: one Raft group per chunk this peer holds (DESIGN §13).
 
 `RaftGroups` drives a pure `RaftNode` (`swarm/raft.py`) per chunk through the Ready loop: it
-persists each `Ready` before sending its messages (`ready_disk.py`), and hands committed
-entries to `GroupApplier` (`group_apply.py`), which applies them with the applied index in one
-store transaction (an entry lands once, even across a crash), and answers their proposers.
-One ticker drives every group; all messages for one peer leave in one `RaftBatch`
-per round (`swarm/raft_mail.py`): many groups' heartbeats cost one frame per pair of peers.
-With a `StoreStates`, logs are compacted into snapshots of the chunk's state, which a member
-that joins or lags far behind installs (`swarm/chunk_state.py`). A peer's node id is the top
-63 bits of its `PeerId` (`node_id`), the same in every group: configurations name peers.
+persists each `Ready` before sending its messages (`ready_disk.py`), and hands committed entries to
+`GroupApplier` (`group_apply.py`), which applies them with the applied index in one store
+transaction (an entry lands once, even across a crash), and answers their proposers. One ticker
+drives every group; all messages for one peer leave in one `RaftBatch` per round
+(`swarm/raft_mail.py`): many groups' heartbeats cost one frame per pair of peers. With a
+`StoreStates`, logs are compacted into snapshots of the chunk's state, which a member that joins or
+lags far behind installs (`swarm/chunk_state.py`). A peer's node id is the top 63 bits of its
+`PeerId` (`node_id`), the same in every group: configurations name peers.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.messages import Ack, RaftBatch
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
+from mapapi.store.offload import off_loop
 from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.group_apply import AppliedHook, GroupApplier
 from mapapi.swarm.group_state import (
@@ -41,7 +42,6 @@ from mapapi.swarm.group_state import (
 from mapapi.swarm.raft import RaftNode
 from mapapi.swarm.raft_mail import RaftMail
 from mapapi.swarm.raft_types import (
-    NONE,
     ConfChange,
     Config,
     NotLeader,
@@ -157,10 +157,12 @@ class RaftGroups:
         self._open(chunk, state_of(kept), applied=kept.applied)
         return True
 
-    def join(self, chunk: ChunkId) -> None:
-        """Take part in a group as a new, empty member (the leader sends the log)."""
-        self.store.raft_save(chunk, hard=(0, NONE, 0))
-        self._open(chunk, PersistentState(), applied=0)
+    async def join(self, chunk: ChunkId) -> None:
+        """Take part in a group as a new, empty member (the leader sends the log); a
+        worker stores its empty state unless one is kept (the loop must not wait)."""
+        await off_loop(self.store, self.store.raft_save, chunk)  # creates none if kept
+        if chunk not in self._groups:  # not opened by another join meanwhile
+            self._open(chunk, PersistentState(), applied=0)
 
     def trust(self, chunk: ChunkId, members: Iterable[PeerId]) -> None:
         """Hear these peers in the chunk's group (its members, as its leader just said)."""
@@ -253,8 +255,9 @@ class RaftGroups:
             RequestTimeout: not committed within `timeout`.
         """
         group = self._group(chunk)
-        start = partial(group.node.propose_conf_change, change)
-        return await self._await_entry(group, start, timeout)
+        return await self._await_entry(
+            group, partial(group.node.propose_conf_change, change), timeout
+        )
 
     async def progressed(self, chunk: ChunkId) -> None:
         """Until something next happens in the chunk's group here (callers re-check)."""
@@ -296,8 +299,7 @@ class RaftGroups:
         start: Callable[[], tuple[int, int]],
         timeout: float,  # noqa: ASYNC109
     ) -> Applied:
-        """Start a proposal (`start` returns its index and term) and wait until
-        its entry applies here."""
+        """Start a proposal (`start` gives its index and term); wait until it applies here."""
         try:
             index, term = start()
         except NotLeader as exc:
@@ -309,8 +311,7 @@ class RaftGroups:
         return await group.applied(index, done, timeout, self._peer)
 
     def _group(self, chunk: ChunkId) -> GroupState:
-        group = self._groups.get(chunk)
-        if group is None:
+        if (group := self._groups.get(chunk)) is None:
             raise NotChunkLeader.of(chunk, None)
         return group
 
@@ -336,8 +337,7 @@ class RaftGroups:
         return Ack()
 
     def _process(self, group: GroupState) -> None:
-        """Run the Ready loop of one group until it has nothing more to do; a group
-        whose Ready cannot be handled halts here (`group_state.halted`)."""
+        """Run one group's Ready loop until it has nothing to do; halt it if one fails."""
         try:
             self._ready_loop(group)
         except Exception as exc:

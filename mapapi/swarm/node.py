@@ -18,7 +18,6 @@ import logging
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import partial
 
 from mapapi.core import limits
 from mapapi.core.clock import LamportClock
@@ -44,7 +43,6 @@ from mapapi.swarm.chunk_state import StoreStates
 from mapapi.swarm.commit_check import CommitRule
 from mapapi.swarm.final_reads import FinalReads
 from mapapi.swarm.group_members import GroupMembers
-from mapapi.swarm.group_state import record_holders
 from mapapi.swarm.groups import Applied, RaftGroups
 from mapapi.swarm.liveness import Liveness, LivenessOptions
 from mapapi.swarm.log_commit import LogCommits
@@ -121,7 +119,7 @@ class Swarm:
             on_applied=self._applied,
             peers=lambda: [m.id for m in (*self.members.all(), *self.members.departed())],
             states=StoreStates(store),
-            on_members=partial(record_holders, store),
+            on_members=lambda chunk, peers: self.groups.disk.holders(chunk, peers),
             # idle groups go quiet while the failure detector hears their leaders
             alive=lambda peer: self.liveness.answers(peer),
         )

@@ -35,6 +35,7 @@ from mapapi.net.messages import (
 )
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
+from mapapi.store.offload import off_loop
 from mapapi.swarm.group_members import GroupMembers
 from mapapi.swarm.groups import RaftGroups
 from mapapi.swarm.membership import Members
@@ -282,12 +283,13 @@ class Replicator:
         raise ChunkNotFound(f"no known peer holds {what}")
 
     # -- lookup by peer ------------------------------------------------------------------
-    def rpc_chunk_list_query(self, req: Request) -> ChunkList:
-        """The chunks this peer holds (of one table, or of all)."""
+    async def rpc_chunk_list_query(self, req: Request) -> ChunkList:
+        """The chunks this peer holds (of one table, or of all), counted in a worker
+        (counting reads every revision)."""
         body: ChunkListQuery = req.body
         if body.table and body.table not in self.store.tables():
             raise UsageError(f"no table {body.table!r}")
-        chunks = self.store.chunks(body.table or None)
+        chunks = await off_loop(self.store, self.store.chunks, body.table or None)
         return ChunkList(tuple(ChunkSummary(c.id, c.table, c.items) for c in chunks))
 
     # -- the lookup index (DESIGN §7, by reference) --------------------------------------

@@ -187,7 +187,7 @@ async def test_a_second_holder_is_a_learner_that_catches_up(world: World) -> Non
     first.groups.found(CHUNK, [first.id])
     await propose_all(first, CHUNK, [b"a", b"b"])
     second = await world.add()
-    second.groups.join(CHUNK)
+    await second.groups.join(CHUNK)
     config = await change_members(first.groups, CHUNK, [first.id, second.id])
     assert (len(config.voters), len(config.learners)) == (1, 1)  # never two voters
     await propose_all(first, CHUNK, [b"c"])  # the learner never holds a commit up
@@ -198,7 +198,7 @@ async def test_a_dead_voter_is_removed_and_a_learner_promoted(world: World) -> N
     nodes = await founded(world, [CHUNK])
     leader = await leader_of(nodes, CHUNK)
     fourth = await world.add()
-    fourth.groups.join(CHUNK)
+    await fourth.groups.join(CHUNK)
     config = await change_members(leader.groups, CHUNK, [*(n.id for n in nodes), fourth.id])
     assert (len(config.voters), len(config.learners)) == (3, 1)
     dead = next(n for n in nodes if n is not leader)

@@ -52,7 +52,7 @@ async def test_a_holder_joining_after_compaction_catches_up_from_a_snapshot(
     assert kept is not None
     assert kept.snap_index > 1  # the log before it is gone: only a snapshot can catch up
     late = await world.add(kind=Writer)
-    late.groups.join(CHUNK)
+    await late.groups.join(CHUNK)
     config = await change_members(leader.groups, CHUNK, [*(n.id for n in nodes), late.id])
     assert len(config.learners) == 1
     await late.wait(lambda: same_replica(late, leader))  # type: ignore[arg-type]
@@ -77,7 +77,7 @@ async def test_a_chunk_with_a_history_hands_it_to_every_holder_that_joins(
     first.groups.found(CHUNK, [first.id])
     await first.wait(lambda: first.groups.is_leader(CHUNK))
     second = await world.add(kind=Writer)
-    second.groups.join(CHUNK)
+    await second.groups.join(CHUNK)
     await change_members(first.groups, CHUNK, [first.id, second.id])
     await second.wait(lambda: same_replica(second, first))
     assert len(second.store.chunk_commits(CHUNK)) == 3

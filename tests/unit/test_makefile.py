@@ -28,8 +28,8 @@ def rule(target: str) -> tuple[str, list[str]]:
 
 
 def install(target: str) -> tuple[str, list[str]]:
-    """The prerequisites of `target` and the recipe of the stamp it depends on."""
-    stamp, _ = rule(target)
+    """The install stamp `target` depends on first, and that stamp's recipe."""
+    stamp = rule(target)[0].split()[0]
     return stamp, rule(stamp)[1]
 
 
@@ -74,6 +74,13 @@ class TestInstallSets:
         assert "'.[dev,plot,pointcloud,registration]'" in pip_line(recipe)
         assert any("ensure-syslibs" in line for line in recipe)
         assert any(line.startswith("touch") and "$(DEMO_STAMP)" in line for line in recipe)
+
+    def test_test_and_demo_run_on_compiled_modules(self) -> None:
+        # where PYTHONDONTWRITEBYTECODE is set, no process would write them itself
+        for target in ("test", "demo"):
+            assert "bytecode" in rule(target)[0].split()
+        _, recipe = rule("bytecode")
+        assert any("-m compileall" in line and "mapapi mapctl" in line for line in recipe)
 
     def test_each_install_step_says_what_it_installs(self) -> None:
         for stamp in ("$(PY)", "$(DEMO_STAMP)", "$(TEST_STAMP)"):

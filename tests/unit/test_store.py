@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from mapapi import ChunkNotFound, CorruptRepoError, UsageError
+from mapapi.core.codec import revision_from_pb
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import ChunkInfo, MemoryStore, SqliteStore, Store
@@ -131,6 +132,9 @@ class TestTablesAndChunks:
             writer.c2: ChunkInfo(writer.c2, "t", 1),
             writer.cu: ChunkInfo(writer.cu, "u", 1),
         }
+        assert writer.store.chunks(only=writer.c2) == [ChunkInfo(writer.c2, "t", 1)]
+        assert writer.store.chunks("u", only=writer.c2) == []
+        assert writer.store.chunks(only=ChunkId.new()) == []
 
     def test_chunks_of_one_table_sorted_by_id(self, writer: Writer) -> None:
         listed = writer.store.chunks("t")
@@ -154,6 +158,34 @@ class TestReplicas:
 
         assert store.chunk_revisions(writer.c1) == revisions
         assert [r.data for r in store.history(item)] == [b"x", b"y"]
+
+    def test_a_chunks_history_as_wire_messages_is_its_typed_history(
+        self, store: Store, writer: Writer
+    ) -> None:
+        assert isinstance(store, MemoryStore | SqliteStore)
+        item = ItemId.new()
+        writer.commit(1, (item, writer.c1, b"x"))
+        writer.commit(2, (item, writer.c1, None), (ItemId.new(), writer.c1, b"z"))
+
+        wire = store.chunk_revisions_pb(writer.c1)
+
+        assert [revision_from_pb(m) for m in wire] == store.chunk_revisions(writer.c1)
+        assert [m.removed for m in wire].count(True) == 1
+
+    def test_a_damaged_id_in_a_chunks_history_is_named(self, tmp_path: Path) -> None:
+        store = SqliteStore(tmp_path / "s.sqlite", create=True)
+        writer = Writer(store)
+        item = ItemId.new()
+        writer.commit(1, (item, writer.c1, b"x"))
+        con = sqlite3.connect(tmp_path / "s.sqlite")
+        con.execute("UPDATE revisions SET author = 'abc' WHERE item_id = ?", (item,))
+        con.commit()
+        con.close()
+        try:
+            with pytest.raises(CorruptRepoError, match="revision"):
+                store.chunk_revisions_pb(writer.c1)
+        finally:
+            store.close()
 
 
 class TestRevisions:
