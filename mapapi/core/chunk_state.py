@@ -24,7 +24,8 @@ class TxState:
 
 @dataclass(frozen=True, slots=True)
 class ChunkState:
-    """A chunk's table, clock, whole history and transaction records."""
+    """A chunk's table, clock, whole history, transaction records and replication
+    factor (0: the swarm's default)."""
 
     table: str
     type_name: str
@@ -32,3 +33,4 @@ class ChunkState:
     revisions: tuple[Revision, ...]
     commits: tuple[CommitRecord, ...]
     txs: tuple[TxState, ...] = ()
+    replication: int = 0

@@ -255,7 +255,9 @@ def encode_chunk_state(
     `PART_ITEMS` rows whose bytes are joined (`core/pb_parts.py`: no call holds
     the interpreter lock for the whole chunk). `revisions`, when given, are the
     state's revisions already as messages (`state.revisions` is then not read)."""
-    head = core_pb2.ChunkSnapshot(table=state.table, type_name=state.type_name, time=state.time)
+    head = core_pb2.ChunkSnapshot(
+        table=state.table, type_name=state.type_name, time=state.time, replication=state.replication
+    )
     out = [head.SerializeToString()]
     if revisions is None:
         revisions = [revision_to_pb(r) for r in state.revisions]
@@ -293,6 +295,7 @@ def decode_chunk_state(data: bytes) -> ChunkState:
             tuple(
                 TxState(CommitId.from_bytes(t.commit_id), t.state, t.time, t.data) for t in m.txs
             ),
+            m.replication,
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a chunk's snapshot does not parse: {exc}") from exc

@@ -31,6 +31,7 @@ from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.core.limits import PEER_ADDRESS
 from mapapi.core.table import check_new_table
 from mapapi.store.file_check import locate_payload
+from mapapi.swarm.voters import DEFAULT_REPLICATION
 
 if TYPE_CHECKING:
     from mapapi.core.change import Change, Conflict
@@ -259,11 +260,13 @@ class RepoOperations:
         """A full id from a full id or a unique prefix of 4+ hex digits."""
         return resolve_id(self.peer, kind, text)
 
-    async def table_create(self, name: str, type_name: str) -> Json:
-        """Create a table (refusing a name that cannot travel, or an unknown type)."""
+    async def table_create(self, name: str, type_name: str, replication: int = 0) -> Json:
+        """Create a table (refusing a name that cannot travel, or an unknown type),
+        whose chunks' replication factor is `replication` (0: the default)."""
         check_new_table(name, type_name)
-        descriptor = await self.peer.create_table(name, type_name)
-        return {"name": descriptor.name, "type": descriptor.type_name}
+        descriptor = await self.peer.create_table(name, type_name, replication)
+        factor = replication or DEFAULT_REPLICATION
+        return {"name": descriptor.name, "type": descriptor.type_name, "replication": factor}
 
     async def table_list(self) -> Json:
         """Tables with chunk and item counts."""
@@ -280,9 +283,14 @@ class RepoOperations:
             ]
         }
 
-    async def chunk_create(self, table: str) -> Json:
-        """Create a chunk."""
-        return {"id": await self.peer.create_chunk(table), "table": table}
+    async def chunk_create(self, table: str, replication: int = 0) -> Json:
+        """Create a chunk, with the replication factor `replication` (0: its table's)."""
+        chunk = await self.peer.create_chunk(table, replication)
+        return {"id": chunk, "table": table, "replication": self._factor(chunk)}
+
+    def _factor(self, chunk: ChunkId) -> int:
+        """The chunk's replication factor as its groups use it (its own, or the default)."""
+        return self.peer.store.replication(chunk) or DEFAULT_REPLICATION
 
     async def chunk_list(self, table: str | None = None, peer: str | None = None) -> Json:
         """Chunks held here, or by the peer at address `peer` (asked over the network)."""
@@ -295,6 +303,7 @@ class RepoOperations:
                     "id": c.id,
                     "table": c.table,
                     "items": c.items,
+                    "replication": self._factor(c.id),
                     "holders": self.peer.holders(c.id),
                     "roles": {str(p): r for p, r in self.peer.roles(c.id).items()},
                 }

@@ -25,7 +25,7 @@ from mapapi.lookup.spatial_index import QueryStats
 from mapapi.service.fsck import rollback_text
 from mapapi.service.repo import Repository
 from mapapi.service.stale import StaleReads
-from mapapi.service.tables import Tables
+from mapapi.service.tables import Tables, check_replication
 from mapapi.store import ChunkInfo, MemoryStore, offload
 from mapapi.store.base import ReplicaStore
 from mapapi.swarm import reading
@@ -279,9 +279,12 @@ class Peer:
         await self.close()
 
     # -- tables and chunks --------------------------------------------------
-    async def create_table(self, name: str, message_type: str | type[Message]) -> TableDescriptor:
-        """Create a table of `message_type` (a class or a full protobuf name)."""
-        return self._tables.create(name, message_type)
+    async def create_table(
+        self, name: str, message_type: str | type[Message], replication: int = 0
+    ) -> TableDescriptor:
+        """Create a table of `message_type` (a class or a full protobuf name); its
+        chunks' replication factor is `replication` (0: the swarm's default)."""
+        return self._tables.create(name, message_type, replication)
 
     def tables(self) -> dict[str, TableDescriptor]:
         """Every table of the repository."""
@@ -291,12 +294,14 @@ class Peer:
         """One table's descriptor."""
         return self._tables.get(name)
 
-    async def create_chunk(self, table: str) -> ChunkId:
+    async def create_chunk(self, table: str, replication: int = 0) -> ChunkId:
         """A new, empty chunk of `table`, held by this peer (and, on the network,
-        the only member of its Raft group, announced in the lookup index)."""
+        the only member of its Raft group, announced in the lookup index), with the
+        replication factor `replication` (0: its table's)."""
         self.table(table)
+        check_replication(replication)
         chunk_id = ChunkId.new()
-        self.store.add_chunk(chunk_id, table)
+        self.store.add_chunk(chunk_id, table, replication)
         self.store.set_holders(chunk_id, [self.id])
         if self.swarm is not None:
             self.swarm.ensure_group(chunk_id)  # others can join it before its first commit

@@ -26,15 +26,19 @@ class Tables:
         self._descriptors: dict[str, TableDescriptor] = {}
         self._policies: dict[str, MergePolicy] = {}
 
-    def create(self, name: str, message_type: str | type[Message]) -> TableDescriptor:
-        """Create a table of `message_type` (a class or a full protobuf name)."""
+    def create(
+        self, name: str, message_type: str | type[Message], replication: int = 0
+    ) -> TableDescriptor:
+        """Create a table of `message_type` (a class or a full protobuf name), whose
+        chunks have the replication factor `replication` (0: the swarm's default)."""
+        check_replication(replication)
         if not name or not name.replace("_", "").replace("-", "").replace(".", "").isalnum():
             raise UsageError(f"bad table name {name!r}: use letters, digits, '_', '-', '.'")
         if isinstance(message_type, str):
             descriptor = TableDescriptor.named(name, message_type)
         else:
             descriptor = TableDescriptor(name, message_type)
-        self.store.add_table(name, descriptor.type_name)
+        self.store.add_table(name, descriptor.type_name, replication)
         self._descriptors[name] = descriptor
         return descriptor
 
@@ -73,3 +77,16 @@ class Tables:
             descriptor.decode(theirs.data),
         )
         return None if merged is None else descriptor.encode(merged)
+
+
+def check_replication(factor: int) -> None:
+    """Refuse a replication factor that cannot be one (0 stands for the default).
+
+    Raises:
+        UsageError: `factor` is negative.
+    """
+    if factor < 0:
+        raise UsageError(
+            f"bad replication factor {factor}: the most voters a chunk's group has, at "
+            "least 1 (0: the default)"
+        )

@@ -110,14 +110,17 @@ class Store(Protocol):
         can apply a commit, so validation and `apply_commit` are atomic together."""
 
     # tables and chunks
-    def add_table(self, name: str, type_name: str) -> None:
-        """Register a table; raises UsageError if the name is taken."""
+    def add_table(self, name: str, type_name: str, replication: int = 0) -> None:
+        """Register a table, whose chunks have the replication factor `replication`
+        unless given their own (0: the swarm's default); raises UsageError if the
+        name is taken."""
 
     def tables(self) -> dict[str, str]:
         """Table name -> full protobuf type name."""
 
-    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
-        """Register a chunk of `table` (which must exist)."""
+    def add_chunk(self, chunk_id: ChunkId, table: str, replication: int = 0) -> None:
+        """Register a chunk of `table` (which must exist), with the replication factor
+        `replication` (0: its table's); a known chunk keeps its own."""
 
     def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
         """The chunks held here, optionally of one table, or just `only` (counting a
@@ -129,6 +132,14 @@ class Store(Protocol):
 
     def chunk_table(self, chunk_id: ChunkId) -> str:
         """The table of a chunk; raises ChunkNotFound."""
+
+    def replication(self, chunk_id: ChunkId) -> int:
+        """The chunk's replication factor, the most voters its Raft group has (0: the
+        swarm's default); set when the chunk is made (else its table's), and carried
+        to every holder with its state. Raises ChunkNotFound."""
+
+    def set_replication(self, chunk_id: ChunkId, factor: int) -> None:
+        """Set the chunk's replication factor (as its holders have it)."""
 
     # revisions
     def read(self, item_id: ItemId, time: int) -> Revision | None:

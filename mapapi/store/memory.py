@@ -32,6 +32,7 @@ class MemoryStore(MemoryChains):
         self._clock = 0
         self._tables: dict[str, str] = {}
         self._chunks: dict[ChunkId, str] = {}
+        self._factors: dict[str, int] = {}  # a table's or a chunk's replication factor, if set
         self._items: dict[ItemId, ItemHistory] = {}
         self._commits: dict[CommitId, tuple[CommitRecord, list[Revision]]] = {}
         self._views: dict[str, bytes] = {}
@@ -54,23 +55,36 @@ class MemoryStore(MemoryChains):
         with self._lock:
             yield
 
-    def add_table(self, name: str, type_name: str) -> None:
-        """Register a table."""
+    def add_table(self, name: str, type_name: str, replication: int = 0) -> None:
+        """Register a table (`replication`: its chunks' factor, 0 for the default)."""
         with self._lock:
             if name in self._tables:
                 raise UsageError(f"table {name!r} already exists")
             self._tables[name] = type_name
+            self._factors[name] = replication
 
     def tables(self) -> dict[str, str]:
         """Table name -> type name."""
         return dict(self._tables)
 
-    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
-        """Register a chunk."""
+    def add_chunk(self, chunk_id: ChunkId, table: str, replication: int = 0) -> None:
+        """Register a chunk (`replication`: its factor, 0 for its table's)."""
         with self._lock:
             if table not in self._tables:
                 raise UsageError(f"no table {table!r}")
-            self._chunks.setdefault(chunk_id, table)
+            if chunk_id not in self._chunks:
+                self._chunks[chunk_id] = table
+                self._factors[chunk_id] = replication or self._factors.get(table, 0)
+
+    def replication(self, chunk_id: ChunkId) -> int:
+        """The chunk's replication factor (0: the swarm's default); raises ChunkNotFound."""
+        self.chunk_table(chunk_id)
+        return self._factors.get(chunk_id, 0)
+
+    def set_replication(self, chunk_id: ChunkId, factor: int) -> None:
+        """Set the chunk's replication factor (as its holders have it)."""
+        with self._lock:
+            self._factors[chunk_id] = factor
 
     def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
         """The chunks, with their live item counts now (`only`: just that one, if held)."""

@@ -26,9 +26,10 @@ from mapapi.store.sqlite_chain import SqliteChains
 from mapapi.store.sqlite_connection import Connections
 from mapapi.store.sqlite_rows import COMMIT_COLUMNS as _COMMIT_COLUMNS
 from mapapi.store.sqlite_rows import REV_COLUMNS as _REV_COLUMNS
+from mapapi.store.sqlite_views import SqliteViews
 
 
-class SqliteStore(SqliteChains):
+class SqliteStore(SqliteChains, SqliteViews):
     """A `Store` in one SQLite file (see the module docstring)."""
 
     def __init__(self, path: str | Path, *, create: bool = False) -> None:
@@ -83,12 +84,13 @@ class SqliteStore(SqliteChains):
         row = self._con().execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return None if row is None else str(row[0])
 
-    def add_table(self, name: str, type_name: str) -> None:
-        """Register a table."""
+    def add_table(self, name: str, type_name: str, replication: int = 0) -> None:
+        """Register a table (`replication`: its chunks' factor, 0 for the default)."""
         con = self._con()
         with self._write(con):
             try:
-                con.execute("INSERT INTO tables VALUES (?, ?)", (name, type_name))
+                sql = "INSERT INTO tables (name, type_name, replication) VALUES (?, ?, ?)"
+                con.execute(sql, (name, type_name, replication))
             except sqlite3.IntegrityError:
                 raise UsageError(f"table {name!r} already exists") from None
 
@@ -96,14 +98,24 @@ class SqliteStore(SqliteChains):
         """Table name -> type name."""
         return dict(self._con().execute("SELECT name, type_name FROM tables ORDER BY name"))
 
-    def add_chunk(self, chunk_id: ChunkId, table: str) -> None:
-        """Register a chunk."""
+    def add_chunk(self, chunk_id: ChunkId, table: str, replication: int = 0) -> None:
+        """Register a chunk (`replication`: its factor, 0 for its table's)."""
         con = self._con()
         with self._write(con):
             try:
-                con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+                sqlite_replica.add_chunk(con, chunk_id, table, replication)
             except sqlite3.IntegrityError:
                 raise UsageError(f"no table {table!r}") from None
+
+    def replication(self, chunk_id: ChunkId) -> int:
+        """The chunk's replication factor (0: the swarm's default); raises ChunkNotFound."""
+        return sqlite_replica.replication(self._con(), chunk_id)
+
+    def set_replication(self, chunk_id: ChunkId, factor: int) -> None:
+        """Set the chunk's replication factor (as its holders have it)."""
+        con = self._con()
+        with self._write(con):
+            con.execute("UPDATE chunks SET replication = ? WHERE id = ?", (factor, chunk_id))
 
     def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
         """Chunks with their live item counts now (`only`: just that one, if held)."""
@@ -247,27 +259,6 @@ class SqliteStore(SqliteChains):
             (prefix, hi),
         )
         return [r[0] for r in rows]
-
-    def load_view(self, name: str) -> bytes | None:
-        """A view."""
-        row = self._con().execute("SELECT body FROM views WHERE name = ?", (name,)).fetchone()
-        return None if row is None else bytes(row[0])
-
-    def save_view(self, name: str, blob: bytes) -> None:
-        """Store a view."""
-        con = self._con()
-        with self._write(con):
-            con.execute("INSERT OR REPLACE INTO views VALUES (?, ?)", (name, blob))
-
-    def delete_view(self, name: str) -> None:
-        """Drop a view."""
-        con = self._con()
-        with self._write(con):
-            con.execute("DELETE FROM views WHERE name = ?", (name,))
-
-    def views(self) -> dict[str, bytes]:
-        """All views."""
-        return {n: bytes(b) for n, b in self._con().execute("SELECT name, body FROM views")}
 
     # -- replication -------------------------------------------------------------
     def holders(self, chunk_id: ChunkId) -> list[PeerId]:

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from mapapi._pb.mapapi.v1 import core_pb2
-from mapapi.core.errors import UsageError
+from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
 from mapapi.store import sqlite_rows
@@ -40,6 +40,27 @@ def set_holders(con: sqlite3.Connection, chunk_id: ChunkId, peers: Sequence[Peer
     """Replace a chunk's holder set."""
     con.execute("DELETE FROM holders WHERE chunk_id = ?", (chunk_id,))
     con.executemany("INSERT OR IGNORE INTO holders VALUES (?, ?)", [(chunk_id, p) for p in peers])
+
+
+def add_chunk(con: sqlite3.Connection, chunk_id: ChunkId, table: str, replication: int) -> None:
+    """Register a chunk unless it is known, with `replication` or else its table's factor."""
+    con.execute(
+        "INSERT OR IGNORE INTO chunks (id, table_name, replication) VALUES (?, ?, "
+        "COALESCE(NULLIF(?, 0), (SELECT replication FROM tables WHERE name = ?), 0))",
+        (chunk_id, table, replication, table),
+    )
+
+
+def replication(con: sqlite3.Connection, chunk_id: ChunkId) -> int:
+    """A chunk's replication factor (0: the default).
+
+    Raises:
+        ChunkNotFound: the store does not have the chunk.
+    """
+    row = con.execute("SELECT replication FROM chunks WHERE id = ?", (chunk_id,)).fetchone()
+    if row is None:
+        raise ChunkNotFound(f"no chunk {chunk_id} here")
+    return int(row[0])
 
 
 def chunk_revisions(path: Path, con: sqlite3.Connection, chunk_id: ChunkId) -> list[Revision]:
@@ -94,8 +115,8 @@ def install(
             f"table {table!r} holds {known[0]} here but {type_name} in the swarm; "
             "rename one of them"
         )
-    con.execute("INSERT OR IGNORE INTO tables VALUES (?, ?)", (table, type_name))
-    con.execute("INSERT OR IGNORE INTO chunks VALUES (?, ?)", (chunk_id, table))
+    con.execute("INSERT OR IGNORE INTO tables (name, type_name) VALUES (?, ?)", (table, type_name))
+    add_chunk(con, chunk_id, table, 0)
     had = [
         CommitId(r[0])
         for r in con.execute(

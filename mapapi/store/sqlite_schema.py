@@ -18,9 +18,11 @@ SCHEMA_VERSION = 1
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS tables (name TEXT PRIMARY KEY, type_name TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS tables (
+    name TEXT PRIMARY KEY, type_name TEXT NOT NULL, replication INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS chunks (
-    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name));
+    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name),
+    replication INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS revisions (
     item_id TEXT NOT NULL, update_time INTEGER NOT NULL, table_name TEXT NOT NULL,
     chunk_id TEXT NOT NULL, data BLOB NOT NULL, insert_time INTEGER NOT NULL,
@@ -44,6 +46,8 @@ CREATE TABLE IF NOT EXISTS holders (
 # Columns added since format 1, with how to add them to an older store (its
 # records then name no author and no view: `log` falls back to other names).
 _ADDED_COLUMNS = {
+    "tables": (("replication", "INTEGER NOT NULL DEFAULT 0"),),  # 0: the swarm's default
+    "chunks": (("replication", "INTEGER NOT NULL DEFAULT 0"),),  # 0: its table's
     "commits": (
         ("author_name", "TEXT NOT NULL DEFAULT ''"),
         ("view", "TEXT NOT NULL DEFAULT ''"),

@@ -38,6 +38,7 @@ class StoreStates:
                 (),  # given as messages below, read from the store without typed revisions
                 tuple(store.chunk_commits(chunk)),
                 txs,
+                store.replication(chunk),
             ),
             store.chunk_revisions_pb(chunk),
         )
@@ -59,6 +60,7 @@ class StoreStates:
             # the snapshot's index, and a chunk's log never forgets a transaction.
             for tx in state.txs:
                 store.raft_tx_put(chunk, tx.commit_id, TxRow(tx.state, tx.time, tx.data))
+            store.set_replication(chunk, state.replication)
             store.raft_applied(chunk, index, state.time)
 
     def knows(self, chunk: ChunkId) -> bool:

@@ -29,7 +29,13 @@ import contextlib
 import logging
 from collections.abc import Callable, Iterable
 
-from mapapi.core.errors import CorruptRepoError, MapError, NotChunkLeader, RequestTimeout
+from mapapi.core.errors import (
+    ChunkNotFound,
+    CorruptRepoError,
+    MapError,
+    NotChunkLeader,
+    RequestTimeout,
+)
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
@@ -139,7 +145,7 @@ class GroupMembers:
         groups: this peer's Raft groups.
         rpc: serves and sends `GroupJoin` and `GroupLeave`.
         address: where a peer is reached now.
-        factor: the replication factor (voters at most).
+        factor: the replication factor of a chunk that sets none (voters at most).
         remove_after: seconds a member stays declared dead before the leader
             removes it (`reap`).
     """
@@ -155,13 +161,20 @@ class GroupMembers:
         self.groups = groups
         self.rpc = rpc
         self._address = address
-        self.factor = factor
+        self.default_factor = factor
         self.remove_after = remove_after
         self._dead_since: dict[PeerId, float] = {}
         self._changing: dict[ChunkId, asyncio.Lock] = {}  # one membership change at a time
         self._leaderless: dict[ChunkId, float] = {}  # since when a group here knows none
         rpc.register(GroupJoin, self.rpc_group_join)
         rpc.register(GroupLeave, self.rpc_group_leave)
+
+    def factor(self, chunk: ChunkId) -> int:
+        """The chunk's replication factor: its own (`Store.replication`), else the default."""
+        try:
+            return self.groups.store.replication(chunk) or self.default_factor
+        except ChunkNotFound:  # not held here (yet)
+            return self.default_factor
 
     async def join(
         self,
@@ -262,7 +275,7 @@ class GroupMembers:
             before = groups.config(chunk).members
             wanted = set(before) | ({node_id(add)} if add else set())
             wanted -= {node_id(drop)} if drop else set()
-            config = await change_nodes(groups, chunk, wanted, self.factor)
+            config = await change_nodes(groups, chunk, wanted, self.factor(chunk))
         members = tuple(sorted(groups.mail.peers(config.members)))
         added = add is not None and node_id(add) not in before
         return GroupChanged(groups.applied(chunk), members, added=added)
@@ -335,11 +348,11 @@ class GroupMembers:
                 # shrink this leader's view of the configuration (a change takes
                 # effect once appended), and what a minority's errors name
                 continue
-            if next_change(config, wanted, self.factor, me, ready) is None:
+            if next_change(config, wanted, self.factor(chunk), me, ready) is None:
                 continue  # nothing to do, or only a learner to promote that lags
             try:
                 async with self._changing.setdefault(chunk, asyncio.Lock()):
-                    await change_nodes(self.groups, chunk, wanted, self.factor)
+                    await change_nodes(self.groups, chunk, wanted, self.factor(chunk))
             except (NotChunkLeader, RequestTimeout) as exc:  # the next round tries again
                 log.warning("chunk %s: dead members not removed yet: %s", chunk.short, exc)
                 continue

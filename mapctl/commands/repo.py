@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -117,6 +119,20 @@ def init(
         )
 
 
+def replication_option(whose: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """`--replication K`: the most voters of {whose} (0, the default: 3)."""
+    return click.option(
+        "--replication",
+        type=click.IntRange(min=0),
+        default=0,
+        show_default=False,
+        metavar="K",
+        help=f"The replication factor: the most voters of {whose}; the other holders "
+        "are learners, which never hold a commit up. Keep it odd (an even one acts as the "
+        "odd number below it). 0, the default: 3.",
+    )
+
+
 @click.group("table")
 def table() -> None:
     """Create and list tables."""
@@ -130,17 +146,22 @@ def table() -> None:
     required=True,
     help="Full protobuf message name, e.g. google.protobuf.Struct or mapapi.v1.Counter.",
 )
+@replication_option("its chunks' groups, unless a chunk is created with its own")
 @json_option
 @pass_session
-def table_create(session: Session, name: str, type_name: str, as_json: bool) -> None:
+def table_create(
+    session: Session, name: str, type_name: str, replication: int, as_json: bool
+) -> None:
     """Create table NAME holding messages of --type."""
     from mapctl import render
 
-    info = session.call("table_create", name=name, type_name=type_name)
+    info = session.call("table_create", name=name, type_name=type_name, replication=replication)
     if as_json:
         render.emit_json(info)
     else:
-        render.line(f"created table {info['name']} ({info['type']})")
+        render.line(
+            f"created table {info['name']} ({info['type']}, replication {info['replication']})"
+        )
 
 
 @table.command("list")
@@ -164,13 +185,14 @@ def chunk() -> None:
 
 @chunk.command("create")
 @click.argument("table_name", metavar="TABLE")
+@replication_option("the chunk's group (default: its table's)")
 @json_option
 @pass_session
-def chunk_create(session: Session, table_name: str, as_json: bool) -> None:
+def chunk_create(session: Session, table_name: str, replication: int, as_json: bool) -> None:
     """Create an empty chunk of TABLE held by this peer."""
     from mapctl import render
 
-    info = session.call("chunk_create", table=table_name)
+    info = session.call("chunk_create", table=table_name, replication=replication)
     if as_json:
         render.emit_json(info)
     else:
@@ -204,7 +226,7 @@ def chunk_list(
             {**row, "holders": ", ".join(_holder(h, row["roles"].get(h)) for h in row["holders"])}
             for row in info["chunks"]
         ]
-        render.records("chunks", rows, ["id", "table", "items", "holders"])
+        render.records("chunks", rows, ["id", "table", "items", "replication", "holders"])
 
 
 def _holder(peer: str, role: str | None) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import sqlite3
 from pathlib import Path
 
 from click.testing import CliRunner
@@ -52,7 +53,7 @@ class TestInit:
 class TestTables:
     def test_create_and_list_json(self, mapctl: Mapctl) -> None:
         created = mapctl.json("table", "create", "pts", "--type", STRUCT)
-        assert created == {"name": "pts", "type": STRUCT}
+        assert created == {"name": "pts", "type": STRUCT, "replication": 3}
         mapctl("table", "create", "counts", "--type", "mapapi.v1.Counter")
         mapctl("chunk", "create", "pts")
         listing = mapctl.json("table", "list")
@@ -91,8 +92,34 @@ class TestTables:
         assert result.exit_code == 2
         assert "--type" in result.output
 
+    def test_a_replication_factor_for_its_chunks(self, mapctl: Mapctl) -> None:
+        made = mapctl.json("table", "create", "wide", "--type", STRUCT, "--replication", "5")
+        assert made["replication"] == 5
+        assert "replication 3" in mapctl("table", "create", "plain", "--type", STRUCT)
+        result = mapctl.invoke("table", "create", "bad", "--type", STRUCT, "--replication", "-1")
+        assert result.exit_code == 2  # refused before anything is created
+        assert [t["name"] for t in mapctl.json("table", "list")["tables"]] == ["plain", "wide"]
+
 
 class TestChunks:
+    def test_a_chunks_replication_factor_is_its_own_or_its_tables(self, mapctl: Mapctl) -> None:
+        mapctl("table", "create", "wide", "--type", STRUCT, "--replication", "5")
+        inherits = mapctl.json("chunk", "create", "wide")
+        own = mapctl.json("chunk", "create", "wide", "--replication", "1")
+        assert (inherits["replication"], own["replication"]) == (5, 1)
+        listed = {c["id"]: c["replication"] for c in mapctl.json("chunk", "list")["chunks"]}
+        assert listed == {inherits["id"]: 5, own["id"]: 1}
+        assert "replication" in mapctl("chunk", "list")
+
+    def test_a_store_from_before_factors_has_the_default(self, points: Mapctl) -> None:
+        store = points.repo / ".mapapi" / "store.sqlite"
+        with sqlite3.connect(store) as con:  # as a store of an earlier format was
+            con.execute("ALTER TABLE chunks DROP COLUMN replication")
+            con.execute("ALTER TABLE tables DROP COLUMN replication")
+        created = points.json("chunk", "create", "pts")
+        assert created["replication"] == 3
+        assert {c["replication"] for c in points.json("chunk", "list")["chunks"]} == {3}
+
     def test_create_json_prints_the_id(self, points: Mapctl) -> None:
         created = points.json("chunk", "create", "pts")
         assert HEX32.fullmatch(created["id"])
@@ -110,11 +137,11 @@ class TestChunks:
         mapctl.commit()
         chunks = mapctl.json("chunk", "list")["chunks"]
         holders = [str(Repository.find(mapctl.repo).config.peer_id)]  # this peer alone
+        common = {"holders": holders, "roles": {}, "replication": 3}  # no group runs offline
         assert sorted(chunks, key=lambda c: c["id"]) == sorted(
             [
-                # no roles off the network: no group runs
-                {"id": first, "table": "pts", "items": 1, "holders": holders, "roles": {}},
-                {"id": second, "table": "other", "items": 0, "holders": holders, "roles": {}},
+                {"id": first, "table": "pts", "items": 1, **common},
+                {"id": second, "table": "other", "items": 0, **common},
             ],
             key=lambda c: c["id"],
         )

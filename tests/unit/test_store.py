@@ -118,6 +118,22 @@ class TestTablesAndChunks:
         with pytest.raises(ChunkNotFound):
             writer.store.chunk_table(ChunkId.new())
 
+    def test_a_chunk_has_its_own_replication_factor_or_its_tables(self, store: Store) -> None:
+        assert isinstance(store, MemoryStore | SqliteStore)  # both are ReplicaStores
+        store.add_table("wide", "google.protobuf.Struct", replication=5)
+        store.add_table("plain", "google.protobuf.Struct")
+        inherits, own, default = ChunkId.new(), ChunkId.new(), ChunkId.new()
+        store.add_chunk(inherits, "wide")
+        store.add_chunk(own, "wide", replication=1)
+        store.add_chunk(default, "plain")
+        store.add_chunk(own, "wide", replication=3)  # known already: keeps its own
+
+        assert [store.replication(c) for c in (inherits, own, default)] == [5, 1, 0]
+        store.set_replication(default, 7)  # as a holder's state says
+        assert store.replication(default) == 7
+        with pytest.raises(ChunkNotFound):
+            store.replication(ChunkId.new())
+
     def test_adding_a_chunk_twice_is_harmless(self, writer: Writer) -> None:
         writer.store.add_chunk(writer.c1, "t")
         assert len(writer.store.chunks("t")) == 2

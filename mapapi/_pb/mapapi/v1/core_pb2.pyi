@@ -178,20 +178,22 @@ class ChunkLogEntry(_message.Message):
     def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ..., floor: _Optional[_Union[TimeFloor, _Mapping]] = ...) -> None: ...
 
 class ChunkSnapshot(_message.Message):
-    __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs")
+    __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs", "replication")
     TABLE_FIELD_NUMBER: _ClassVar[int]
     TYPE_NAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
     REVISIONS_FIELD_NUMBER: _ClassVar[int]
     COMMITS_FIELD_NUMBER: _ClassVar[int]
     TXS_FIELD_NUMBER: _ClassVar[int]
+    REPLICATION_FIELD_NUMBER: _ClassVar[int]
     table: str
     type_name: str
     time: int
     revisions: _containers.RepeatedCompositeFieldContainer[Revision]
     commits: _containers.RepeatedCompositeFieldContainer[CommitRecord]
     txs: _containers.RepeatedCompositeFieldContainer[TxState]
-    def __init__(self, table: _Optional[str] = ..., type_name: _Optional[str] = ..., time: _Optional[int] = ..., revisions: _Optional[_Iterable[_Union[Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[CommitRecord, _Mapping]]] = ..., txs: _Optional[_Iterable[_Union[TxState, _Mapping]]] = ...) -> None: ...
+    replication: int
+    def __init__(self, table: _Optional[str] = ..., type_name: _Optional[str] = ..., time: _Optional[int] = ..., revisions: _Optional[_Iterable[_Union[Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[CommitRecord, _Mapping]]] = ..., txs: _Optional[_Iterable[_Union[TxState, _Mapping]]] = ..., replication: _Optional[int] = ...) -> None: ...
 
 class TxState(_message.Message):
     __slots__ = ("commit_id", "state", "time", "data")
