@@ -1,15 +1,14 @@
-"""`mapctl bench soak`: peers commit while others crash, leave and come back
-(issue 7 §7), and a checker verifies that nothing was lost.
+"""`mapctl bench soak`: peers commit while others crash, stop, stall and come
+back (issue 7 §7, issue 13 §4), and a checker verifies that nothing was lost.
 
 P peer daemons (`LocalSwarm`: real processes on loopback) all hold two chunks:
 a counter, and a bank of `ACCOUNTS` accounts whose balances sum to a fixed
 total. One client per peer loops, through that peer's control endpoint and a
 view of its own (the path `mapctl` takes): an increment of the counter or a
 transfer between two accounts, retried on conflicts and on retriable errors.
-Meanwhile a chaos loop, every few seconds, kills a random peer with SIGKILL,
-stops one gracefully (it leaves its chunks), or starts a stopped one again
-without `--join` (it rejoins through the members it remembered and catches
-up). At most one peer is down at a time, so the others are always a quorum.
+Meanwhile the chaos (`mapbench/soak_chaos.py`) crashes a peer, stops one,
+pauses one for seconds, or starts the one that is down again without `--join`,
+half the time on a new port.
 
 At the end every peer runs again and, once they agree, the checker verifies:
 
@@ -27,13 +26,11 @@ import asyncio
 import contextlib
 import json
 import logging
-import os
 import random
-import signal
 import statistics
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -46,51 +43,19 @@ from mapapi.core.errors import (
     ViewClosedError,
 )
 from mapapi.service.control import RemoteOperations
-from mapapi.service.daemon_process import daemon_command, spawn_detached, stop_daemon
-from mapapi.service.repo import Repository
 from mapbench.demo.swarm import LocalSwarm, SwarmPeer
+from mapbench.soak_chaos import Chaos, Node, Tally
 
 log = logging.getLogger(__name__)
 
 COUNTER, BANK = "soak_counter", "soak_bank"
 ACCOUNTS, BALANCE = 8, 100
-CHAOS_PERIOD = (2.0, 5.0)
-"""Seconds between two chaos actions (uniform)."""
 SETTLE_TIMEOUT = 120.0
 """Seconds the peers may take to agree once the chaos stopped."""
 BACKOFF = 0.2
 """Seconds a client waits before it retries after a retriable error."""
 
 Progress = Callable[[dict[str, Any]], None]
-
-
-@dataclass
-class Tally:
-    """What the clients and the chaos loop did."""
-
-    increments: int = 0  # acknowledged
-    transfers: int = 0  # acknowledged
-    unknown_increments: int = 0  # the peer died mid-commit, or the commit was uncertain
-    unknown_transfers: int = 0
-    conflicts: int = 0
-    retries: int = 0
-    crashes: int = 0
-    stops: int = 0
-    restarts: int = 0
-    restart_s: list[float] = field(default_factory=list)  # each restart until it served
-
-
-@dataclass
-class Node:
-    """One peer of the soak: its repository and, while it runs, its client."""
-
-    repo: Repository
-    ops: RemoteOperations | None = None
-    up: asyncio.Event = field(default_factory=asyncio.Event)
-
-    async def call(self, op: str, **args: Any) -> Any:
-        assert self.ops is not None
-        return await self.ops.call(op, args)
 
 
 class Soak:
@@ -107,6 +72,7 @@ class Soak:
         self.tally = Tally()
         self.items: dict[str, Any] = {}
         self._stop = asyncio.Event()
+        self.chaos = Chaos(self.nodes, self.rng, self.tally, self._report)
         self.errors: list[str] = []  # errors a client did not expect
 
     async def run(self) -> dict[str, Any]:
@@ -117,14 +83,14 @@ class Soak:
                 self._attach(node, peer)
             await self._setup()
             clients = [asyncio.create_task(self._client(i)) for i in range(len(self.nodes))]
-            chaos = asyncio.create_task(self._chaos())
+            chaos = asyncio.create_task(self.chaos.run(self._stop))
             await asyncio.sleep(self.seconds)
             self._stop.set()
             await asyncio.gather(chaos)
             await asyncio.gather(*clients)
             for i, node in enumerate(self.nodes):
                 if not node.up.is_set():
-                    await self._start(i)
+                    await self.chaos.start(i)
             checked = await self._settle()
         finally:
             for node in self.nodes:
@@ -140,7 +106,7 @@ class Soak:
             **{k: v for k, v in asdict(self.tally).items() if k != "restart_s"},
             "restart_s_median": round(statistics.median(restarts), 2) if restarts else None,
             "restart_s_max": round(max(restarts), 2) if restarts else None,
-            "errors": self.errors,
+            "errors": [*self.errors, *self.chaos.errors],
             "peers": len(self.nodes),
             "seconds": round(time.monotonic() - started, 1),
         }
@@ -253,69 +219,6 @@ class Soak:
             balance = int(got["data"].get("balance", 0)) + delta
             data = json.dumps({"owner": got["data"]["owner"], "balance": balance})
             await node.call("set", view=view, table=BANK, data=data, item=item)
-
-    # -- chaos -------------------------------------------------------------------------------
-    async def _chaos(self) -> None:
-        while True:
-            pause = self.rng.uniform(*CHAOS_PERIOD)
-            try:
-                await asyncio.wait_for(self._stop.wait(), pause)
-                return
-            except TimeoutError:
-                pass
-            down = [i for i, n in enumerate(self.nodes) if not n.up.is_set()]
-            try:
-                if down:
-                    await self._start(down[0])
-                elif self.rng.random() < 0.7:
-                    await self._crash(self.rng.randrange(len(self.nodes)))
-                else:
-                    await self._leave(self.rng.randrange(len(self.nodes)))
-            except MapError as exc:  # reported; the node stays down and starts again later
-                self.errors.append(f"chaos: {type(exc).__name__}: {exc}")
-                log.warning("soak chaos: %s", exc)
-            self._report()
-
-    async def _crash(self, index: int) -> None:
-        node = self.nodes[index]
-        record = node.repo.running_peer()
-        node.up.clear()
-        if record is not None:
-            os.kill(record.pid, signal.SIGKILL)  # no goodbye, as a crash
-            self.tally.crashes += 1
-            log.info("soak: killed %s (pid %d)", node.repo.root.name, record.pid)
-        # The client keeps its connection: a call in flight must end in DaemonDied
-        # (its outcome unknown), not in a closed connection that hides the commit.
-
-    async def _leave(self, index: int) -> None:
-        node = self.nodes[index]
-        node.up.clear()  # the client finishes the operation it is in, then waits
-        self.tally.stops += 1
-        try:
-            await asyncio.to_thread(stop_daemon, node.repo)
-        except MapError:
-            record = node.repo.running_peer()
-            if record is not None:  # it would not stop: end it, as a crash
-                os.kill(record.pid, signal.SIGKILL)
-            raise
-        log.info("soak: stopped %s", node.repo.root.name)
-
-    async def _start(self, index: int) -> None:
-        node = self.nodes[index]
-        await self._disconnect(node)
-        argv = daemon_command(node.repo)  # no --join: it rejoins through the members it knew
-        began = time.monotonic()
-        record = await asyncio.to_thread(spawn_detached, node.repo, argv)  # kills one that hangs
-        self.tally.restart_s.append(time.monotonic() - began)
-        node.ops = RemoteOperations.of(node.repo, record, alive=node.repo.peer_locked)
-        node.up.set()
-        self.tally.restarts += 1
-        log.info("soak: started %s again", node.repo.root.name)
-
-    async def _disconnect(self, node: Node) -> None:
-        if node.ops is not None:
-            await node.ops.close()
-            node.ops = None
 
     def _report(self) -> None:
         if self.progress is not None:

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The swarm figures of docs/benchmarks.md: the transport's round trip, then
 # `mapctl bench viewtest` for P = 1, 2, 4 and `mapctl bench commit` for
-# K = 1..8 (both writer placements), RUNS times each, as JSON lines under OUT,
+# K = 1..8 (the writer a follower, and the leader), RUNS times each, as JSON lines under OUT,
 # and the two PNG plots made from them. Takes about 10 minutes; run it on an
 # otherwise idle machine (every JSON line records the load average it saw).
 #
@@ -30,9 +30,9 @@ for run in $(seq "$RUNS"); do
         "$MAPCTL" bench viewtest --peers "$p" -n "$N" --json >> "$OUT/swarm-viewtest.jsonl"
     done
     for k in 1 2 3 4 5 6 7 8; do
-        for writer in other arbiter; do
-            if [ "$k" = 1 ] && [ "$writer" = other ]; then
-                continue  # one holder: the writer is the arbiter
+        for writer in follower leader; do
+            if [ "$k" = 1 ] && [ "$writer" = follower ]; then
+                continue  # one holder: the writer leads its group
             fi
             echo "== run $run: commit --holders $k --writer $writer -n $COMMITS" >&2
             "$MAPCTL" bench commit --holders "$k" --writer "$writer" -n "$COMMITS" --json \

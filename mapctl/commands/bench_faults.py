@@ -84,11 +84,12 @@ def bench_flood(senders: int, megabytes: int, mode: str, as_json: bool) -> None:
 @json_option
 def bench_soak(minutes: float, peers: int, seed: int, directory: str | None, as_json: bool) -> None:
     """Peer daemons commit increments and bank transfers while they crash
-    (kill -9), leave and come back at random; then check that no acknowledged
-    commit was lost, the bank total held and every history agrees (issue 7).
+    (kill -9), stop, stall for seconds (SIGSTOP) and come back at random, half of
+    them on a new port; then check that no acknowledged commit was lost, the bank
+    total held and every history agrees (issue 7, issue 13).
 
     Exits 1 if an invariant broke. Progress goes to stderr after each crash,
-    stop or restart.
+    stop, pause or restart.
     """
     import asyncio
     import shutil

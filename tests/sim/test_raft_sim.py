@@ -11,7 +11,8 @@ import os
 
 import pytest
 
-from mapbench.sim import TICK, Faults, Sim, Violation, replay_command
+from mapapi.swarm.raft_types import Entry, Role
+from mapbench.sim import TICK, Faults, Sim, SimNode, Violation, replay_command
 
 SEEDS = 300  # the pure core: about 7 s on one core; `SIM_SEEDS=5000 pytest tests/sim -k seed`
 COMMIT_SEEDS = 200  # the commit path (about 0.07 s a seed): about 15 s on one core
@@ -84,6 +85,43 @@ def test_checker_catches_a_divergent_apply() -> None:
     forged = sim.checker.history[-1]
     with pytest.raises(Violation, match="applied"):
         sim.checker.applied(node, type(forged)(forged.term + 1, forged.index, forged.kind))
+
+
+def _led(sim: Sim) -> SimNode:
+    """The node that leads at the end of a calm run."""
+    (leader,) = [n for n in sim.nodes.values() if n.alive and n.raft.role is Role.LEADER]
+    return leader
+
+
+def test_checker_catches_two_leaders_in_one_term() -> None:
+    """Election Safety is checked: a second leader of a term is reported."""
+    sim = run_seed(3, faults=CALM)
+    leader = _led(sim)
+    sim.checker.leaders[leader.raft.term] = leader.id + 1  # as if another led this term
+    with pytest.raises(Violation, match="two leaders in term"):
+        sim.checker.leader(leader)
+
+
+def test_checker_catches_two_entries_at_one_index_and_term() -> None:
+    """Log Matching is checked: another entry persisted at a known (index, term) is reported."""
+    sim = run_seed(3, faults=CALM)
+    known = sim.checker.history[-1]
+    forged = Entry(known.term, known.index, known.kind, known.data + b"forged")
+    with pytest.raises(Violation, match="two different entries"):
+        sim.checker.persisted(next(iter(sim.nodes.values())), (forged,))
+
+
+def test_checker_catches_a_leader_without_a_committed_entry() -> None:
+    """Leader Completeness is checked: a leader elected later whose log lacks an entry
+    applied at an earlier term is reported."""
+    sim = run_seed(3, faults=CALM)
+    leader = _led(sim)
+    index = sim.checker.history[-1].index
+    sim.checker.history[-1] = Entry(leader.raft.term + 5, index)  # applied as another entry
+    sim.checker.bounds[-1] = 0  # ... in a term before this leader's
+    sim.checker.leaders.pop(leader.raft.term)  # so its election is checked again
+    with pytest.raises(Violation, match="lacks applied"):
+        sim.checker.leader(leader)
 
 
 # -- regressions: seeds that found bugs, kept as named tests -----------------------------

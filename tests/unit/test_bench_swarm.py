@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -118,3 +119,13 @@ def test_a_secure_swarm_commits_with_the_same_messages(tmp_path: Path) -> None:
     figures = commit_latency(2, 5, writer="leader", directory=tmp_path, warmup=1, secure=True)
     assert figures["secure"] is True
     assert figures["messages_per_commit"] >= 2.0  # the same protocol over CurveZMQ
+
+
+def test_the_swarm_script_asks_only_for_writers_bench_commit_knows() -> None:
+    """`scripts/bench-swarm.sh` (make bench-swarm) outlived a rename once: its
+    `--writer` values must be the command's choices."""
+    script = (Path(__file__).resolve().parents[2] / "scripts" / "bench-swarm.sh").read_text()
+    (loop,) = re.findall(r"for writer in ([\w ]+); do", script)
+    command = cli.commands["bench"].commands["commit"]  # type: ignore[attr-defined]
+    (writer,) = [p for p in command.params if p.name == "writer"]
+    assert set(loop.split()) == set(writer.type.choices)
