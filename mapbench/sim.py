@@ -481,9 +481,11 @@ class Sim:
         }
 
 
-def replay_command(seed: int) -> str:
-    """The one command that replays a seed in the test suite."""
-    return f"SIM_SEED={seed} pytest tests/sim -k seed -s"
+def replay_command(seed: int, tests: str = "seed") -> str:
+    """The one command that replays a seed in the test suite (`tests`: pytest's `-k`,
+    "seed" for the core and the commit path, "tx_seed" for transactions), with the
+    Python `make test` installs."""
+    return f"SIM_SEED={seed} .venv/bin/python -m pytest tests/sim -k {tests} -s"
 
 
 def run_seeds(

@@ -2,7 +2,8 @@
 
 Two runs per seed: the pure core (`test_seed`) and the commit path, real stores and
 `apply_proposal` (`test_commit_seed`). A failing seed names the command that replays it alone:
-`SIM_SEED=<n> pytest tests/sim -k seed -s`; `mapctl bench sim --seeds N` runs more.
+`SIM_SEED=<n> .venv/bin/python -m pytest tests/sim -k seed -s`; `mapctl bench sim --seeds N`
+runs more.
 """
 
 from __future__ import annotations
@@ -85,6 +86,19 @@ def test_checker_catches_a_divergent_apply() -> None:
     forged = sim.checker.history[-1]
     with pytest.raises(Violation, match="applied"):
         sim.checker.applied(node, type(forged)(forged.term + 1, forged.index, forged.kind))
+
+
+def test_a_violation_names_the_command_that_replays_its_seed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def violate(self: Sim) -> None:
+        raise Violation("forged")
+
+    monkeypatch.setattr(Sim, "run", violate)
+    with pytest.raises(pytest.fail.Exception) as failed:
+        run_seed(5)
+    assert "forged" in str(failed.value)
+    assert "replay: SIM_SEED=5 .venv/bin/python -m pytest tests/sim -k seed -s" in str(failed.value)
 
 
 def _led(sim: Sim) -> SimNode:

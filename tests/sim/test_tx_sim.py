@@ -1,6 +1,7 @@
 """Seeded simulations of transactions over two chunks (two-phase commit, DESIGN §13);
 see `mapbench.sim_tx`. A failing seed names the command that replays it alone:
-`SIM_SEED=<n> pytest tests/sim -k tx_seed -s`; `mapctl bench sim --mode tx` runs more.
+`SIM_SEED=<n> .venv/bin/python -m pytest tests/sim -k tx_seed -s`; `mapctl bench sim --mode tx`
+runs more.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from mapapi.core.proposal import TxDecision
 from mapapi.store.memory import MemoryStore
 from mapapi.swarm import apply_tx
 from mapbench import sim_tx_world
+from mapbench.sim import replay_command
 from mapbench.sim_tx import TxSim
 from mapbench.sim_world import Violation
 
@@ -35,7 +37,7 @@ def test_tx_seed(seed: int) -> None:
         sim.run()
     except Violation as err:
         pytest.fail(
-            f"{err}\n{sim.summary()}\nreplay: SIM_SEED={seed} pytest tests/sim -k tx_seed -s",
+            f"{err}\n{sim.summary()}\nreplay: {replay_command(seed, 'tx_seed')}",
             pytrace=False,
         )
     print(sim.summary())
