@@ -282,8 +282,7 @@ class Peer:
     async def create_table(
         self, name: str, message_type: str | type[Message], replication: int = 0
     ) -> TableDescriptor:
-        """Create a table of `message_type` (a class or a full protobuf name); its
-        chunks' replication factor is `replication` (0: the swarm's default)."""
+        """Create a table of `message_type` (a class or protobuf name); see `Tables.create`."""
         return self._tables.create(name, message_type, replication)
 
     def tables(self) -> dict[str, TableDescriptor]:
@@ -295,9 +294,8 @@ class Peer:
         return self._tables.get(name)
 
     async def create_chunk(self, table: str, replication: int = 0) -> ChunkId:
-        """A new, empty chunk of `table`, held by this peer (and, on the network,
-        the only member of its Raft group, announced in the lookup index), with the
-        replication factor `replication` (0: its table's)."""
+        """A new, empty chunk of `table` held here (on the network: its group's one
+        member, announced in the lookup index); `replication`, 0: its table's factor."""
         self.table(table)
         check_replication(replication)
         chunk_id = ChunkId.new()

@@ -88,7 +88,7 @@ async def test_forgetting_a_group_waits_for_its_record_and_drops_the_rest(
     forgotten = asyncio.Event()
     with locked(store):
         disk.holders(chunk, [P])
-        await asyncio.sleep(0)  # the worker takes P, and waits for the lock
+        await asyncio.sleep(0)  # sync-ok: one yield, so the worker takes P and waits for the lock
         disk.holders(chunk, [Q])  # the next, waiting for it
         disk.then(chunk, forgotten.set)  # the group is forgotten: Q is never written
         assert not forgotten.is_set()
