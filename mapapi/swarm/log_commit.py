@@ -2,11 +2,11 @@
 
 The writer turns its transaction into a `Proposal` for the chunk and hands it to
 the chunk's leader: itself, or the leader its group names, over the swarm port
-(`RaftPropose`). The leader answers at once the conflicts its replica shows
-already (`apply.early_conflicts`), else appends it, and once the entry applies
-there (every holder decides it alike, `swarm/apply.py`) answers with the commit,
-or with the conflicts as a `ConflictError`. The application's commit rules are
-checked here, over the whole transaction, before it is proposed.
+(`RaftPropose`). The leader answers the conflicts its replica shows once the
+entries in flight on the same items applied (`swarm/in_flight.py`), else appends
+it; once the entry applies there (every holder decides it alike, `swarm/apply.py`)
+it answers with the commit, or with the conflicts as a `ConflictError`. The
+application's commit rules are checked here, over the whole transaction, first.
 
 A transaction that writes several chunks commits in two phases across their
 logs: `swarm/two_phase.py` decides what to propose, this module proposes it
@@ -42,10 +42,11 @@ from mapapi.net.messages import RaftPropose, RaftProposed
 from mapapi.net.rpc import Request, Rpc
 from mapapi.store.offload import off_loop
 from mapapi.swarm import faults
-from mapapi.swarm.apply import Outcome, early_conflicts
+from mapapi.swarm.apply import Outcome
 from mapapi.swarm.commit_check import CommitRule, checked_entry
 from mapapi.swarm.group_apply import HEAVY_BYTES
 from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
+from mapapi.swarm.in_flight import InFlight
 from mapapi.swarm.two_phase import Answer, TwoPhase
 
 log = logging.getLogger(__name__)
@@ -99,6 +100,7 @@ class LogCommits:
         self.rules = tuple(rules)
         self._answers = answers
         self._label = label
+        self.in_flight = InFlight()
         rpc.register(RaftPropose, self.rpc_raft_propose)
 
     async def commit(self, tx: Transaction, message: str) -> Committed:
@@ -327,11 +329,9 @@ class LogCommits:
 
     async def _propose_once(self, chunk: ChunkId, entry: LogEntry, data: bytes) -> Outcome:
         if self.groups.is_leader(chunk):
-            if conflicts := early_conflicts(self.groups.store, chunk, entry):
-                return Outcome(conflicts=conflicts)  # known here: no round of the log
-            outcome = (await self.groups.propose(chunk, data)).result
-            assert isinstance(outcome, Outcome)  # the groups apply with `apply_tx.applier`
-            return outcome
+            return await self.in_flight.propose(
+                self.groups, chunk, entry, data, heavy=len(data) >= HEAVY_BYTES
+            )
         leader = self.groups.leader(chunk)
         if leader is None:
             raise NotChunkLeader.of(chunk, None)
@@ -380,13 +380,13 @@ class LogCommits:
             raise NotChunkLeader.of(body.chunk, self.groups.leader(body.chunk))
         members = {self.groups.me, *self.groups.members(body.chunk)}
         args = (self.groups.store, body.chunk, body.proposal, req.sender, members)
-        if len(body.proposal) < HEAVY_BYTES:
-            entry = checked_entry(*args)  # conflicts known here need no round of the log:
-            self._raise_failure(body.chunk, Outcome(conflicts=early_conflicts(*args[:2], entry)))
-        else:  # a mission's rows: decoded and checked in a worker (issue 14 §1)
-            await off_loop(self.groups.store, checked_entry, *args)
-        applied = (await self.groups.propose(body.chunk, body.proposal)).result
-        assert isinstance(applied, Outcome)  # the groups apply with `apply_tx.applier`
+        if heavy := len(body.proposal) >= HEAVY_BYTES:  # a mission's rows: in a worker
+            entry = await off_loop(self.groups.store, checked_entry, *args)  # (issue 14 §1)
+        else:
+            entry = checked_entry(*args)
+        applied = await self.in_flight.propose(
+            self.groups, body.chunk, entry, body.proposal, heavy=heavy
+        )
         outcome = self._raise_failure(body.chunk, applied)
         d = outcome.decision
         return RaftProposed(

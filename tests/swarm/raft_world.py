@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from mapapi.core.change import Change, Op
 from mapapi.core.clock import LamportClock
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, ItemId, PeerId
@@ -186,3 +187,22 @@ class Writer(Ledger):
 
     async def commit_transaction(self, tx: Transaction, message: str) -> CommitRecord | None:
         return (await self.commits.commit(tx, message)).record
+
+
+async def item_group(world: World, chunk: ChunkId, item: ItemId) -> tuple[Writer, Writer]:
+    """Three writers founding `chunk` with `item` in it; (a follower, the leader)."""
+    nodes = [await world.add(kind=Writer) for _ in range(3)]
+    for node in nodes:
+        node.store.add_table("t", OPAQUE)
+        node.store.add_chunk(chunk, "t")
+        node.groups.found(chunk, [n.id for n in nodes])
+    leader = await leader_of(nodes, chunk)
+    assert isinstance(leader, Writer)
+    first = Transaction(leader, 0, leader.id)
+    first.stage(Change(Op.INSERT, "t", item, chunk, b"0"))
+    await first.commit("0")
+    follower = next(n for n in nodes if n is not leader)
+    assert isinstance(follower, Writer)
+    await follower.wait(lambda: follower.groups.leader(chunk) == leader.id)
+    await follower.wait(lambda: follower.store.latest([item]) != {})
+    return follower, leader

@@ -12,7 +12,7 @@ from mapapi.core.change import Change, Op
 from mapapi.core.errors import ConflictError
 from mapapi.core.ids import ChunkId, ItemId
 from mapapi.core.transaction import Transaction
-from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
+from tests.swarm.raft_world import World, item_group
 from tests.swarm.raft_world import world as world  # the fixture
 
 CHUNK = ChunkId.new()
@@ -20,25 +20,8 @@ ITEM = ItemId.new()
 AHEAD = 1_000  # the reader's Lamport time, far past the chunk's clock
 
 
-async def group(world: World) -> tuple[Writer, Writer]:
-    """Three writers founding the chunk with ITEM in it; (a follower, the leader)."""
-    nodes = [await world.add(kind=Writer) for _ in range(3)]
-    for node in nodes:
-        node.store.add_table("t", OPAQUE)
-        node.store.add_chunk(CHUNK, "t")
-        node.groups.found(CHUNK, [n.id for n in nodes])
-    leader = await leader_of(nodes, CHUNK)  # type: ignore[arg-type]
-    first = Transaction(leader, 0, leader.id)
-    first.stage(Change(Op.INSERT, "t", ITEM, CHUNK, b"0"))
-    await first.commit("0")
-    follower = next(n for n in nodes if n is not leader)
-    await follower.wait(lambda: follower.groups.leader(CHUNK) == leader.id)
-    await follower.wait(lambda: follower.store.latest([ITEM]) != {})
-    return follower, leader  # type: ignore[return-value]
-
-
 async def test_a_write_after_a_view_closed_the_log_is_its_conflict(world: World) -> None:
-    reader, writer = await group(world)
+    reader, writer = await item_group(world, CHUNK, ITEM)
     await reader.commits.read_at(CHUNK, AHEAD)
     assert reader.store.raft_time(CHUNK) >= AHEAD
     seen = reader.store.read(ITEM, AHEAD)
@@ -56,7 +39,7 @@ async def test_a_write_after_a_view_closed_the_log_is_its_conflict(world: World)
 
 
 async def test_a_clock_already_past_the_view_costs_no_floor(world: World) -> None:
-    reader, _ = await group(world)
+    reader, _ = await item_group(world, CHUNK, ITEM)
     applied = reader.groups.applied(CHUNK)
     await reader.commits.read_at(CHUNK, 1)
     assert reader.groups.applied(CHUNK) == applied  # no entry was added to the log
