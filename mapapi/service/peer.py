@@ -331,17 +331,22 @@ class Peer:
 
     # -- transactions ---------------------------------------------------------
     def now(self) -> int:
-        """The time a transaction begun now reads at.
+        """The time a transaction begun now reads at: the newest commit time this
+        peer has applied (other processes may commit to its store too), or, in a
+        swarm, been acknowledged as a writer, whichever is later.
 
-        Alone, the newest commit time applied to the store (other processes may
-        commit to it too). In a swarm, the Lamport clock, which every message
-        advances: a view then includes every commit this peer has heard of; its
-        first read of a chunk catches the replica up and closes the chunk's log at
-        the view's time (`Swarm.read_at`), so no commit at or before it can still
-        arrive (DESIGN §13).
+        A view then includes every commit this peer has heard of. Not the Lamport
+        clock, which every message advances: a view at the newest commit needs no
+        `TimeFloor` at its first read of a chunk that is up to date, where a view at
+        the Lamport clock always did (a round of the log per view). That first read
+        still catches the chunk up (`Swarm.read_at`), so the view sees every commit
+        acknowledged anywhere before it (DESIGN §13).
         """
-        self.clock.advance_to(self.store.clock())
-        return self.clock.now() if self.swarm is not None else self.store.clock()
+        newest = self.store.clock()
+        if self.swarm is None:
+            return newest
+        self.clock.advance_to(newest)
+        return max(newest, self.swarm.log.acknowledged)
 
     def begin(
         self, at: int | None = None, *, isolation: Isolation = "snapshot", stale: bool = False

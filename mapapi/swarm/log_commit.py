@@ -101,6 +101,7 @@ class LogCommits:
         self._answers = answers
         self._label = label
         self.in_flight = InFlight()
+        self.acknowledged = 0  # the newest commit time acknowledged here (`Peer.now`)
         rpc.register(RaftPropose, self.rpc_raft_propose)
 
     async def commit(self, tx: Transaction, message: str) -> Committed:
@@ -174,6 +175,7 @@ class LogCommits:
     async def _done(self, tx: Transaction, outcome: Outcome) -> Committed:
         if outcome.record is not None:
             self.clock.advance_to(outcome.record.time)
+            self.acknowledged = max(self.acknowledged, outcome.record.time)
             await self._applied_here(outcome.record)
         tx.committed(list(outcome.revisions))
         return Committed(outcome.record, outcome.revisions)
@@ -342,13 +344,8 @@ class LogCommits:
         decision = None
         if answer.decided and not isinstance(entry, TimeFloor):
             decision = TxDecision(entry.commit_id, answer.commit, answer.time)
-        return Outcome(
-            answer.record,
-            answer.revisions,
-            busy=answer.busy,
-            prepared=answer.prepared,
-            decision=decision,
-        )
+        record, revisions, busy = answer.record, answer.revisions, answer.busy
+        return Outcome(record, revisions, busy=busy, prepared=answer.prepared, decision=decision)
 
     def _raise_failure(
         self, chunk: ChunkId, outcome: Outcome, tx: Transaction | None = None

@@ -16,7 +16,7 @@ import pytest
 
 from mapapi import ChunkId, ConflictError, ItemId, Peer
 from mapapi.net.shaping import LinkShape, Shaper
-from tests.swarm.conftest import TABLE, Counter, counter_chunk, share, value
+from tests.swarm.conftest import TABLE, Counter, counter_chunk, net, share, value
 
 LAG = 0.15
 """Seconds every message of the writer takes to arrive."""
@@ -112,3 +112,29 @@ async def test_a_view_at_a_given_time_never_moves(
     await set_counter(writer, item, 1)
     assert await value(reader, item) == 1
     assert await value(reader, item, at=then) == 0
+
+
+async def test_a_view_of_an_up_to_date_chunk_adds_nothing_to_its_log(
+    make_peer: Callable[..., Awaitable[Peer]],
+) -> None:
+    writer, reader, chunk, item = await shared_counter(make_peer)
+    committed = await set_counter(writer, item, 1)
+    assert await value(reader, item) == 1
+    before = net(writer).groups.applied(chunk)
+    assert reader.clock.now() > committed  # messages moved the Lamport clock past it
+    tx = reader.begin()
+    assert (await tx.get(TABLE, item)).value == 1  # type: ignore[union-attr]
+    assert net(writer).groups.applied(chunk) == before  # no time floor was needed
+
+
+async def test_a_view_reads_its_own_write_in_a_chunk_it_reads_second(
+    make_peer: Callable[..., Awaitable[Peer]],
+) -> None:
+    writer, _ = await writer_and_reader(make_peer)
+    _, older = await counter_chunk(writer, 0, name="older")
+    _, newer = await counter_chunk(writer, 0, name="newer")
+    committed = await set_counter(writer, newer, 5)
+    view = writer.begin()
+    assert (await view.get(TABLE, older)).value == 0  # type: ignore[union-attr]
+    assert view.begin_time >= committed  # the older chunk's clock did not pull it back
+    assert (await view.get(TABLE, newer)).value == 5  # type: ignore[union-attr]
