@@ -230,12 +230,16 @@ class Rpc:
         (it was declared dead: waiting out their deadlines would only stall)."""
         self._fail_pending(address, lambda: PeerUnavailable(reason))
 
-    async def close(self) -> None:
-        """Cancel running handlers, fail pending requests with PeerUnavailable,
-        then close the transport. Idempotent."""
+    async def close(self, grace: float = 0.0) -> None:
+        """Fail pending requests with PeerUnavailable, give running handlers up to
+        `grace` seconds to answer (a handler that asked for the close, say), cancel
+        the rest, then close the transport. Idempotent."""
         if self._closed:
             return
         self._closed = True
+        running = [t for t in self._tasks if t is not asyncio.current_task()]
+        if grace > 0 and running:
+            await asyncio.wait(running, timeout=grace)
         for address, fut in self._pending.values():
             if not fut.done():
                 fut.set_exception(

@@ -211,6 +211,49 @@ class TestShutdown:
         assert server.running_handlers == 0
         assert asyncio.all_tasks() == {asyncio.current_task()}
 
+    async def test_a_handler_running_at_close_answers_within_the_grace(
+        self, make_rpc: MakeRpc
+    ) -> None:
+        """`peer stop`: the handler of the call that asked for the close is still
+        running when the close comes; its answer must go out, not be cancelled."""
+        client, server = await make_rpc(), await make_rpc()
+        started, release = asyncio.Event(), asyncio.Event()
+
+        async def stopping(req: Request) -> Pong:
+            started.set()
+            await release.wait()
+            return Pong(b"stopped")
+
+        server.register(Ping, stopping)
+        answer = asyncio.create_task(client.request(server.address, Ping(), timeout=5))
+        async with asyncio.timeout(2):
+            await started.wait()
+        closing = asyncio.create_task(server.close(grace=5))
+        release.set()
+        assert await answer == Pong(b"stopped")
+        await closing
+        assert server.running_handlers == 0
+
+    async def test_a_handler_still_running_after_the_grace_is_cancelled(
+        self, make_rpc: MakeRpc
+    ) -> None:
+        client, server = await make_rpc(), await make_rpc()
+        started, never = asyncio.Event(), asyncio.Event()
+
+        async def stuck(req: Request) -> Pong:
+            started.set()
+            await never.wait()
+            return Pong()
+
+        server.register(Ping, stuck)
+        pending = asyncio.create_task(client.request(server.address, Ping(), timeout=0.5))
+        async with asyncio.timeout(2):
+            await started.wait()
+        await server.close(grace=0.01)
+        assert server.running_handlers == 0
+        with pytest.raises(RequestTimeout):
+            await pending
+
     async def test_a_request_that_arrives_as_it_closes_leaves_no_coroutine_unawaited(
         self, make_rpc: MakeRpc
     ) -> None:
