@@ -185,9 +185,10 @@ class Leader:
             if node != self.id:
                 self._send_append(node)
 
-    def _bcast_heartbeat(self, context: bytes) -> None:
-        for node in sorted(self._progress):
-            if node != self.id:
+    def _bcast_heartbeat(self, context: bytes, *, voters_only: bool = False) -> None:
+        to = self.config.voters if voters_only else self._progress
+        for node in sorted(to):
+            if node != self.id and node in self._progress:
                 commit = min(self._progress[node].match, self.log.committed)
                 self._send(M.HEARTBEAT, node, commit=commit, context=context)
 
@@ -239,6 +240,8 @@ class Leader:
             if acks is not None and self.config.has_quorum(acks):
                 for request in self._read_only.release(m.context):
                     self._answer_read(request)
+                if waiting := self._read_only.last_context():  # came in during the round
+                    self._bcast_heartbeat(waiting, voters_only=True)
 
     def _handle_append_response(self, m: Message, pr: Progress) -> None:
         if m.reject:
@@ -275,9 +278,13 @@ class Leader:
         elif self.config.voters == {self.id}:
             self._answer_read(request)
         else:
+            # One round of heartbeats at a time, to the voters (only theirs count):
+            # reads that come in meanwhile wait for the next, which confirms them all.
+            round_out = bool(self._read_only.last_context())
             self._read_only.add(request)
             self._read_only.ack(request.context, self.id)
-            self._bcast_heartbeat(request.context)
+            if not round_out:
+                self._bcast_heartbeat(request.context, voters_only=True)
 
     def _answer_read(self, request: ReadRequest) -> None:
         if request.requester == self.id:

@@ -532,6 +532,30 @@ class TestReadIndex:
         net.flush()
         assert net.reads[3] == [ReadState(net.nodes[1].log.committed, b"f")]
 
+    def test_reads_that_come_during_a_round_share_the_next(self) -> None:
+        net = Network()
+        net.elect(1)
+        net.propose(1, b"a")
+        net.sent.clear()
+        for context in (b"r1", b"r2", b"r3"):  # r2 and r3 while r1's round is out
+            net.nodes[1].read_index(context)
+        net.flush()
+        committed = net.nodes[1].log.committed
+        assert net.reads[1] == [ReadState(committed, c) for c in (b"r1", b"r2", b"r3")]
+        rounds = [m.context for m in net.sent if m.kind is M.HEARTBEAT and m.context]
+        assert rounds == [b"r1", b"r1", b"r3", b"r3"]  # two rounds of two voters, not three
+
+    def test_a_read_round_asks_the_voters_only(self) -> None:
+        net = Network(voters=3, learners=(4,))
+        net.elect(1)
+        net.propose(1, b"a")
+        net.sent.clear()
+        net.nodes[1].read_index(b"r")
+        net.flush()
+        assert net.reads[1] == [ReadState(net.nodes[1].log.committed, b"r")]
+        asked = {m.to for m in net.sent if m.kind is M.HEARTBEAT and m.context == b"r"}
+        assert asked == {2, 3}  # a learner's answer would not count
+
     def test_read_without_a_leader_is_refused(self) -> None:
         net = Network()
         with pytest.raises(NotLeader) as err:
