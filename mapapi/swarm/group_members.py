@@ -12,8 +12,11 @@ as the leader, removes members that liveness has declared dead for a while.
 
 A member removed while it was away (dead to the others for `remove_after`)
 hears nothing from its group any more, and its own messages are dropped: only
-members speak. So a peer whose group has known no leader for `STUCK_AFTER`
-asks to join again, through a member that answers (`rejoin_stuck`). The leader
+members speak. So a peer whose group has known no leader for `STUCK_AFTER`, or
+has not heard the leader it knows for as long while the group is not quiet (a
+removed learner: it never campaigns, so it keeps that leader), asks to join
+again, through a member that answers (`rejoin_stuck`); so does every group of a
+peer that itself stood still for the removal delay. The leader
 answers a member with nothing new, and takes one it had removed in again as a
 learner (`GroupChanged.added`); either way the peer now hears the members the
 answer names, the leader among them (it may have missed the change that added
@@ -166,6 +169,8 @@ class GroupMembers:
         self._dead_since: dict[PeerId, float] = {}
         self._changing: dict[ChunkId, asyncio.Lock] = {}  # one membership change at a time
         self._leaderless: dict[ChunkId, float] = {}  # since when a group here knows none
+        self._tried: dict[ChunkId, float] = {}  # when this peer last asked to join again
+        self._round: float | None = None  # when `rejoin_stuck` last ran
         rpc.register(GroupJoin, self.rpc_group_join)
         rpc.register(GroupLeave, self.rpc_group_leave)
 
@@ -281,21 +286,34 @@ class GroupMembers:
         return GroupChanged(groups.applied(chunk), members, added=added)
 
     async def rejoin_stuck(self, answers: Callable[[PeerId], bool], now: float) -> list[ChunkId]:
-        """Ask to join again each group here that has known no leader for
-        `STUCK_AFTER` seconds (by `now`, monotonic), through a member `answers`
-        says answers (see the module docstring); the chunks joined again."""
+        """Ask to join again, through a member `answers` says answers, each group here
+        that looks cut off from its leader (`_cut_off`, by `now`, monotonic; one try
+        per `STUCK_AFTER`), and every group after this process stood still for
+        `remove_after` (paused or blocked: meanwhile its groups may have gone quiet
+        and removed it). See the module docstring; returns the chunks joined again."""
+        paused = self._round is not None and now - self._round >= self.remove_after
+        self._round = now
         back: list[ChunkId] = []
+        silent = self.groups.news_age()
         for chunk in self.groups.store.chunk_ids():
-            if self.groups.leader(chunk) is not None:
-                self._leaderless.pop(chunk, None)
+            if not (self._cut_off(chunk, silent.get(chunk, 0.0), now) or paused):
                 continue
-            if now - self._leaderless.setdefault(chunk, now) < STUCK_AFTER:
+            if now - self._tried.get(chunk, now - STUCK_AFTER) < STUCK_AFTER:
                 continue
-            self._leaderless[chunk] = now  # one try per STUCK_AFTER
+            self._tried[chunk] = now
             with contextlib.suppress(NotChunkLeader):  # no group here (yet)
                 if await self._rejoin(chunk, answers):
                     back.append(chunk)
         return back
+
+    def _cut_off(self, chunk: ChunkId, silent: float, now: float) -> bool:
+        """Whether the group has known no leader for `STUCK_AFTER`, or has heard
+        nothing for as long from the one it knows while not quiet: a learner removed
+        while cut off still knows its leader, which no longer writes to it."""
+        if self.groups.leader(chunk) is None:
+            return now - self._leaderless.setdefault(chunk, now) >= STUCK_AFTER
+        self._leaderless.pop(chunk, None)
+        return silent >= STUCK_AFTER and not self.groups.quiet(chunk)
 
     async def _rejoin(self, chunk: ChunkId, answers: Callable[[PeerId], bool]) -> bool:
         """Ask members that answer, one after the other, until one takes this peer's

@@ -169,19 +169,18 @@ class RaftGroups:
         self._group(chunk).trusted = frozenset(node_id(p) for p in members)
 
     def _open(self, chunk: ChunkId, state: PersistentState, applied: int) -> None:
-        node = RaftNode(
-            node_id(self.me),
-            state,
-            random.Random(self._rng.getrandbits(64)),
-            self._options,
-            applied=applied,
-        )
+        rng = random.Random(self._rng.getrandbits(64))
+        node = RaftNode(node_id(self.me), state, rng, self._options, applied=applied)
         self._groups[chunk] = GroupState(chunk, node)
 
     def leader(self, chunk: ChunkId) -> PeerId | None:
         """The chunk's leader as this peer knows it, or None during an election."""
         group = self._groups.get(chunk)
         return None if group is None else self._peer(group.leader)
+
+    def quiet(self, chunk: ChunkId) -> bool:
+        """Whether the chunk's group here is quiet: idle, its leader sends nothing."""
+        return self._group(chunk).node.quiet
 
     def is_leader(self, chunk: ChunkId) -> bool:
         """Whether this peer leads the chunk's group now."""

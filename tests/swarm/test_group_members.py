@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
+
 from mapapi.core.change import Change, Op
-from mapapi.core.ids import ChunkId, ItemId
+from mapapi.core.ids import ChunkId, ItemId, PeerId
 from mapapi.core.transaction import Transaction
+from mapapi.swarm import group_members
 from mapapi.swarm.group_members import REMOVE_AFTER
 from mapapi.swarm.raft_wire import node_id
 from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
@@ -110,3 +113,51 @@ async def test_peers_joining_at_once_all_end_up_members(world: World) -> None:
     assert leader.groups.applied(CHUNK) - before <= 2 * len(newcomers)  # no churn
     for node in newcomers:
         assert value(node) == b"0"
+
+
+async def removed_learner(world: World) -> tuple[Writer, Writer]:
+    """A learner the leader removed as dead for `REMOVE_AFTER` (it was cut off) while
+    it still knows that leader, and a commit it missed; (the learner, the leader)."""
+    _, leader = await group(world)
+    learner = await world.add(kind=Writer)
+    assert isinstance(learner, Writer)
+    await learner.members.join(CHUNK, via=leader.id)
+    assert node_id(learner.id) in leader.groups.config(CHUNK).learners
+    assert await leader.members.reap(lambda p: p == learner.id, now=0.0) == []
+    assert await leader.members.reap(lambda p: p == learner.id, now=REMOVE_AFTER) == [learner.id]
+    assert node_id(learner.id) not in leader.groups.config(CHUNK).members
+    assert learner.groups.leader(CHUNK) == leader.id  # nothing told it
+    await write(leader, b"while away")
+    return learner, leader
+
+
+def everyone(peer: PeerId) -> bool:
+    return True
+
+
+async def test_a_removed_learner_that_hears_nothing_asks_to_join_again(
+    world: World, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    learner, leader = await removed_learner(world)
+    assert not learner.groups.quiet(CHUNK)  # it expects heartbeats
+    monkeypatch.setattr(group_members, "STUCK_AFTER", 0.0)  # silent long enough already
+    assert await learner.members.rejoin_stuck(everyone, now=1.0) == [CHUNK]
+    assert node_id(learner.id) in leader.groups.config(CHUNK).learners
+    await learner.wait(lambda: value(learner) == b"while away")
+
+
+async def test_a_peer_that_stood_still_asks_every_group_again(world: World) -> None:
+    learner, leader = await removed_learner(world)
+    assert await learner.members.rejoin_stuck(everyone, now=0.0) == []  # heard it lately
+    assert await learner.members.rejoin_stuck(everyone, now=REMOVE_AFTER) == [CHUNK]
+    assert node_id(learner.id) in leader.groups.config(CHUNK).learners
+    await learner.wait(lambda: value(learner) == b"while away")
+
+
+async def test_a_member_that_hears_its_leader_asks_nothing(world: World) -> None:
+    nodes, leader = await group(world)
+    follower = next(n for n in nodes if n is not leader)
+    for now in (0.0, 10.0, 20.0):
+        assert await follower.members.rejoin_stuck(everyone, now=now) == []
+    assert await follower.members.rejoin_stuck(everyone, now=20.0 + REMOVE_AFTER) == []
+    assert node_id(follower.id) in leader.groups.config(CHUNK).voters  # asked, still one
