@@ -273,8 +273,8 @@ class MapOperations:
         peer = online(self.peer)
         table = await peer.participate(chunk)
         self._loads[key] = (todo.index(chunk) + 1, len(todo))
-        items = next((c.items for c in await peer.off_loop(peer.chunks) if c.id == chunk), 0)
-        return {"chunk": chunk, "table": table, "items": items}
+        counted = await peer.off_loop(peer.store.chunks, None, chunk)  # that chunk's rows only
+        return {"chunk": chunk, "table": table, "items": counted[0].items if counted else 0}
 
     async def load_progress(self, bbox: list[float], table: str | None = None) -> Json:
         """How far a running `load_bbox(bbox, table)` got: chunks loaded of the

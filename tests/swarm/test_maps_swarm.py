@@ -113,6 +113,8 @@ async def test_load_bbox_loads_every_chunk_of_the_missions_found(make_peer: Make
         (table, chunk) for table, chunk in result.chunks.items()
     )
     assert {r["table"]: r["held"] for r in loaded["results"]} == {MISSIONS: True, VERTICES: True}
+    items = {c["table"]: c["items"] for c in loaded["loaded"]}
+    assert (items[VERTICES], sum(items.values())) == (1_728, 1 + 1_728 + 2_512)  # each its own
     (info,) = await list_missions(b)
     assert (info.vertices, info.edges) == (1_728, 2_512)
     assert await ops.load_progress([10, -20, -1, 11, -19, 1]) == {"loaded": 0, "of": 0}
