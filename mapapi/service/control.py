@@ -78,8 +78,7 @@ ALIVE_CHECK = 0.5
 """Seconds between checks that the daemon still runs while an operation waits."""
 QUERY_TIMEOUT = 5.0
 """Seconds to wait for another peer's list of chunks."""
-CLOSE_GRACE = 2.0
-"""Seconds the calls still running at a shutdown get to answer (`ControlServer.close`)."""
+CLOSE_GRACE = 2.0  # seconds the calls running at a shutdown get to answer
 MAX_MESSAGE_SIZE = 512 * 1024 * 1024
 """Replies as large as a big `ls --json` must fit through the local endpoint."""
 
@@ -225,9 +224,8 @@ class ControlServer:
         return ControlResult(await asyncio.to_thread(dumps, result))  # in parts: json_parts
 
     async def close(self) -> None:
-        """Stop serving and close the endpoint (an ipc socket file is removed).
-        Calls still running get `CLOSE_GRACE` seconds to answer: `peer stop`'s own
-        call is one, and its answer was lost when the close came first."""
+        """Stop serving and close the endpoint (an ipc socket file is removed); calls
+        still running, `peer stop`'s own among them, get `CLOSE_GRACE` s to answer."""
         await self.rpc.close(grace=CLOSE_GRACE)
         if self._bound is not None and self._bound.startswith("ipc://"):
             with contextlib.suppress(FileNotFoundError):
