@@ -324,6 +324,8 @@ class LogCommits:
             voters = self.groups.mail.peers(self.groups.config(chunk).voters)
         except NotChunkLeader:  # not a member (any more)
             return error
+        if not voters:  # no configuration yet (joined, not caught up): nothing to name
+            return error
         down = [p for p in voters if p != self.groups.me and not self._answers(p)]
         if len(voters) - len(down) > len(voters) // 2:
             return error

@@ -15,13 +15,14 @@ import pytest
 from mapapi.core import codec
 from mapapi.core.change import Change, Op
 from mapapi.core.clock import LamportClock
-from mapapi.core.errors import ConflictError, NotChunkLeader, RequestTimeout
+from mapapi.core.errors import ConflictError, NoQuorum, NotChunkLeader, RequestTimeout
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.proposal import Proposal
 from mapapi.core.transaction import Transaction
 from mapapi.swarm.apply import Outcome
 from mapapi.swarm.chain_watch import ChainWatch
 from mapapi.swarm.group_members import change_members
+from mapapi.swarm.log_commit import LogCommits
 from tests.swarm.raft_world import (
     OPAQUE,
     Ledger,
@@ -310,3 +311,18 @@ async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
     assert "another history" in watches[damaged.id].diverged[CHUNK]
     assert [d.peer for d in leader.store.divergences()] == [damaged.id]  # both sides see it
     assert watches[healthy.id].diverged == {}
+
+
+async def test_a_member_that_knows_no_configuration_yet_claims_no_quorum(world: World) -> None:
+    """A group joined and not caught up (after a restart, say) knows no voters: a
+    read fails as it did (no leader), not with "no quorum: 0 of 0 voters"."""
+    node = await world.add()
+    node.store.add_table("t", OPAQUE)
+    node.store.add_chunk(CHUNK, "t")
+    await node.groups.join(CHUNK)
+    down = LogCommits(  # every peer looks down to it
+        node.groups, node.rpc, world.addresses.__getitem__, LamportClock(), answers=lambda p: False
+    )
+    with pytest.raises(NotChunkLeader) as caught:
+        await down.caught_up(CHUNK, timeout=0.05)
+    assert not isinstance(caught.value, NoQuorum)
