@@ -6,7 +6,8 @@
 # `plot`, `missions --swarm`) while b imports one more copy and c commits five
 # edits to one of a's vertices; then all three stopped and started again with no
 # --join, a last edit from c, and every peer.log read for suspicions, deaths,
-# removals and errors. Ends with one line per check; exit 1 if the histories differ.
+# removals and errors. Before the restart it prints each daemon's peak memory.
+# Ends with one line per check; exit 1 if the histories differ.
 #
 #   bash scripts/field-trial.sh                       # COPIES=2
 #   KEEP=1 bash scripts/field-trial.sh                # keep the repositories
@@ -79,6 +80,11 @@ timed "plot on a" "$MAPCTL" -C a plot -o a.png
 timed "missions --swarm on a" "$MAPCTL" -C a missions --swarm
 wait "$importing" "$editing"
 "$MAPCTL" -C a peer status --json | field '"loop lag on a over the last minute, ms: %s" % d["loop_lag_ms"]'
+
+for r in a b c; do  # the most each daemon held in memory so far (issue 14 §5: <= 250 MB)
+    pid=$("$MAPCTL" -C "$r" peer status --json | field 'd["pid"]')
+    echo "peak resident memory of $r's daemon: $(awk '/VmHWM/ {print int($2 / 1024)}' "/proc/$pid/status") MB"
+done
 
 stop_all
 for r in a b c; do "$MAPCTL" -C "$r" peer start --detach >/dev/null; done
