@@ -333,7 +333,7 @@ class Peer:
     def now(self) -> int:
         """The time a transaction begun now reads at: the newest commit time this
         peer has applied (other processes may commit to its store too), or, in a
-        swarm, been acknowledged as a writer, whichever is later.
+        swarm, been acknowledged as a writer or pushed by a trigger, whichever is later.
 
         A view then includes every commit this peer has heard of. Not the Lamport
         clock, which every message advances: a view at the newest commit needs no
@@ -346,7 +346,7 @@ class Peer:
         if self.swarm is None:
             return newest
         self.clock.advance_to(newest)
-        return max(newest, self.swarm.log.acknowledged)
+        return max(newest, self.swarm.log.acknowledged, self.swarm.subscriptions.newest)
 
     def begin(
         self, at: int | None = None, *, isolation: Isolation = "snapshot", stale: bool = False

@@ -220,6 +220,7 @@ class Subscriptions:
         self.mine: dict[bytes, Subscription] = {}
         self.announced: Announcements[bytes] = Announcements(self._entries, ttl, "subscription")
         self.pushes = 0  # pushes tried, to others and to itself (for tests and benchmarks)
+        self.newest = 0  # the newest commit pushed here: a view begun now includes it
         self._descriptors: dict[str, TableDescriptor] = {}
         rpc.register(TriggerPush, self.rpc_trigger_push)
 
@@ -280,6 +281,7 @@ class Subscriptions:
         subscription = self.mine.get(push.subscription)
         if subscription is None:  # cancelled: a push may still arrive late
             return
+        self.newest = max(self.newest, push.record.time)  # heard of here (`Peer.now`)
         types = {t.name: t.type_name for t in push.tables}
         event = commit_event(push.record, push.revisions, types)
         if event is not None:

@@ -198,3 +198,17 @@ async def test_a_vanished_subscriber_is_dropped_when_its_ttl_expires(
     pushes = net(a).subscriptions.pushes
     await put(a, chunk, thing(1, 1), "nobody listens")
     assert net(a).subscriptions.pushes == pushes
+
+
+async def test_a_view_begun_after_a_push_includes_its_commit(make_peer: MakePeer) -> None:
+    """The subscriber holds no replica of the chunk: only the push told it of the
+    commit, and a view it begins afterwards must be at or past that commit."""
+    a, b = await lookup_swarm(make_peer, 2)
+    chunk = await rooms(a)
+    subscription = await b.subscribe(SubscriptionSpec(REGION))
+    for n in range(3):  # a's clock runs ahead of b's
+        await put(a, chunk, thing(50, 50), f"outside {n}")
+    await put(a, chunk, thing(1, 1), "inside")
+    (event,) = received(subscription)
+    assert chunk not in b.store.chunk_ids()
+    assert b.begin().begin_time >= event.record.time
