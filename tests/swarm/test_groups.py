@@ -313,7 +313,7 @@ async def test_a_replica_whose_history_differs_says_so(world: World) -> None:
     assert watches[healthy.id].diverged == {}
 
 
-async def test_a_member_that_knows_no_configuration_yet_claims_no_quorum(world: World) -> None:
+async def test_a_member_without_a_configuration_does_not_claim_no_quorum(world: World) -> None:
     """A group joined and not caught up (after a restart, say) knows no voters: a
     read fails as it did (no leader), not with "no quorum: 0 of 0 voters"."""
     node = await world.add()
