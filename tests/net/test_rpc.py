@@ -190,20 +190,31 @@ class TestRemoteErrors:
         assert await client.request(server.address, Ping(b"ok")) == Pong(b"ok")
 
 
+async def held_request(
+    make_rpc: MakeRpc,
+    timeout: float,  # noqa: ASYNC109 (the request's own deadline)
+) -> tuple[Rpc, Rpc, asyncio.Event, asyncio.Task[object]]:
+    """A client's request whose handler on the server has started and waits until
+    the returned event is set (then answers `Pong(b"done")`): (client, server,
+    the event, the client's pending request)."""
+    client, server = await make_rpc(), await make_rpc()
+    started, release = asyncio.Event(), asyncio.Event()
+
+    async def held(req: Request) -> Pong:
+        started.set()
+        await release.wait()
+        return Pong(b"done")
+
+    server.register(Ping, held)
+    pending = asyncio.create_task(client.request(server.address, Ping(), timeout=timeout))
+    async with asyncio.timeout(2):
+        await started.wait()
+    return client, server, release, pending
+
+
 class TestShutdown:
     async def test_close_fails_pending_and_leaves_no_tasks(self, make_rpc: MakeRpc) -> None:
-        client, server = await make_rpc(), await make_rpc()
-        started, never = asyncio.Event(), asyncio.Event()
-
-        async def stuck(req: Request) -> Pong:
-            started.set()
-            await never.wait()
-            return Pong()
-
-        server.register(Ping, stuck)
-        pending = asyncio.create_task(client.request(server.address, Ping(), timeout=5))
-        async with asyncio.timeout(2):
-            await started.wait()
+        client, server, _, pending = await held_request(make_rpc, timeout=5)
         await client.close()
         with pytest.raises(PeerUnavailable):
             await pending
@@ -216,39 +227,17 @@ class TestShutdown:
     ) -> None:
         """`peer stop`: the handler of the call that asked for the close is still
         running when the close comes; its answer must go out, not be cancelled."""
-        client, server = await make_rpc(), await make_rpc()
-        started, release = asyncio.Event(), asyncio.Event()
-
-        async def stopping(req: Request) -> Pong:
-            started.set()
-            await release.wait()
-            return Pong(b"stopped")
-
-        server.register(Ping, stopping)
-        answer = asyncio.create_task(client.request(server.address, Ping(), timeout=5))
-        async with asyncio.timeout(2):
-            await started.wait()
+        _, server, release, answer = await held_request(make_rpc, timeout=5)
         closing = asyncio.create_task(server.close(grace=5))
         release.set()
-        assert await answer == Pong(b"stopped")
+        assert await answer == Pong(b"done")
         await closing
         assert server.running_handlers == 0
 
     async def test_a_handler_still_running_after_the_grace_is_cancelled(
         self, make_rpc: MakeRpc
     ) -> None:
-        client, server = await make_rpc(), await make_rpc()
-        started, never = asyncio.Event(), asyncio.Event()
-
-        async def stuck(req: Request) -> Pong:
-            started.set()
-            await never.wait()
-            return Pong()
-
-        server.register(Ping, stuck)
-        pending = asyncio.create_task(client.request(server.address, Ping(), timeout=0.5))
-        async with asyncio.timeout(2):
-            await started.wait()
+        _, server, _, pending = await held_request(make_rpc, timeout=0.5)
         await server.close(grace=0.01)
         assert server.running_handlers == 0
         with pytest.raises(RequestTimeout):
