@@ -263,7 +263,7 @@ async def _run(mode: str, layout: Plan, bandwidth: float, seed: int) -> dict[str
         chunks: dict[str, list[ChunkId]] = {}
         for peer, graph in zip(peers, missions, strict=False):
             (result,) = await import_missions(peer, [graph])
-            chunks[graph.name] = list(result.chunks.values())
+            chunks[graph.name] = result.all_chunks()
         pullers = _pullers(mode, layout, peers)
         for each in shapers:
             each.default = LinkShape(bandwidth=bandwidth)

@@ -202,7 +202,7 @@ def _reads(ops: Operations, mission: ImportResult, scratch: Path) -> dict[str, R
         "export": ("export_map", {"mission": mission.mission, "path": str(scratch / "out.g2o")}),
         "plot": ("plot_map", {"path": str(scratch / "out.png"), "missions": [mission.mission]}),
         "query_bbox_load": ("load_bbox", {"bbox": box}),
-        "ls": ("ls", {"view": "main", "table": VERTICES, "chunk": mission.chunks[VERTICES]}),
+        "ls": ("ls", {"view": "main", "table": VERTICES, "chunk": mission.tiles[0].vertices}),
     }
     return {name: _caller(ops, *calls[name]) for name in READS}
 

@@ -4,8 +4,13 @@ cells (the Map API paper, Cieslewski et al., ICRA 2015, Fig. 8).
 The missions are real: each robot of the 8-robot tunnels set is one mission,
 and the parking-garage trajectory is cut into consecutive segments of
 `SEGMENT` vertices, one mission each, as the paper's Fig. 8 data set held many
-missions. A mission is one chunk in the index, registered by a random node
-under its box. The grid covers the data's extent (plus a small margin) in
+missions; a g2o file given by path is a data set of its own missions. Each
+mission is registered by a random node as an import places it: its row under
+the mission's box, and each of its spatial tiles (`mapapi.maps.tiles`) under
+the tile's box (`mapbench.spatial_tiles`). A query then reports, besides the
+missions found, the tiles found and the rows and bytes loading them moves
+(`query-bbox --load`: the missions' rows and the tiles found), against the rows
+and bytes of the whole missions found. The grid covers the data's extent (plus a small margin) in
 ``n x n`` cells over the two horizontal axes; the vertical axis, the one of
 smallest extent, stays undivided (DESIGN §7: ground robots' missions span all
 their floors). The garage is z-up, but the tunnels set is in a camera frame,
@@ -30,14 +35,13 @@ Nothing here asserts a speed; the figures go to docs/benchmarks.md.
 from __future__ import annotations
 
 import asyncio
-import hashlib
 import logging
 import math
 import random
 import statistics
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +53,7 @@ from mapapi.lookup.spatial_index import QueryStats, SpatialIndex, SpatialRef
 from mapapi.maps import MissionGraph, read_g2o, read_kimera
 from mapapi.net import LinkShape, Shaper
 from mapbench.ring import still_ring
+from mapbench.spatial_tiles import MissionPart, Moved, TilePart, mission_part
 
 log = logging.getLogger(__name__)
 
@@ -87,15 +92,25 @@ class SpatialCheckFailed(MapError):
 
 @dataclass(frozen=True)
 class Dataset:
-    """The missions of one real map, each by its box.
+    """The missions of one real map, each with its box and tiles.
 
     Attributes:
-        name: one of `DATASETS`.
-        missions: mission name -> the box around its vertices.
+        name: one of `DATASETS`, or a g2o file's stem.
+        parts: mission name -> the mission as registered.
     """
 
     name: str
-    missions: dict[str, BBox]
+    parts: dict[str, MissionPart]
+
+    @property
+    def missions(self) -> dict[str, BBox]:
+        """Mission name -> the box around its vertices."""
+        return {name: part.bbox for name, part in self.parts.items()}
+
+    @property
+    def tiles(self) -> list[TilePart]:
+        """Every mission's tiles."""
+        return [tile for part in self.parts.values() for tile in part.tiles]
 
     @property
     def extent(self) -> BBox:
@@ -112,7 +127,8 @@ class Dataset:
 
 def segments(graph: MissionGraph, size: int) -> list[MissionGraph]:
     """`graph`'s vertices, in index order, cut into missions of `size` vertices
-    (the last may be shorter), named ``{graph.name}-{k:02d}``; edges are dropped.
+    (the last may be shorter), named ``{graph.name}-{k:02d}``, each with the
+    edges among its own vertices (edges between segments are dropped).
 
     Raises:
         ValueError: `size` is below 1.
@@ -120,33 +136,41 @@ def segments(graph: MissionGraph, size: int) -> list[MissionGraph]:
     if size < 1:
         raise ValueError(f"a segment holds at least 1 vertex, got {size}")
     order = sorted(graph.vertices)
-    return [
-        MissionGraph(
-            f"{graph.name}-{k:02d}",
-            graph.robot,
-            graph.frame,
-            {i: graph.vertices[i] for i in order[start : start + size]},
-        )
-        for k, start in enumerate(range(0, len(order), size))
-    ]
+    cut = []
+    for k, start in enumerate(range(0, len(order), size)):
+        name = f"{graph.name}-{k:02d}"
+        vertices = {i: graph.vertices[i] for i in order[start : start + size]}
+        edges = [
+            replace(e, source=(name, e.source[1]), target=(name, e.target[1]))
+            for e in graph.edges
+            if e.source[1] in vertices and e.target[1] in vertices
+        ]
+        cut.append(MissionGraph(name, graph.robot, graph.frame, vertices, edges))
+    return cut
 
 
 def load_dataset(name: str, samples: Path = SAMPLES) -> Dataset:
-    """The missions of data set `name`, read from the `samples` folder.
+    """The missions of data set `name` (read from the `samples` folder), or of
+    the g2o file at path `name`.
 
     Raises:
-        UsageError: `name` is not one of `DATASETS`.
-        MapImportError: a sample file is missing or malformed.
+        UsageError: `name` is not one of `DATASETS` nor a g2o file.
+        MapImportError: a file is missing or malformed.
     """
     if name == "parking-garage":
         garage = read_g2o(samples / "pose_graphs" / "parking-garage.g2o")
         graphs = segments(garage, SEGMENT)
     elif name == "tunnels":
         graphs = read_kimera(samples / "kimera_multi_tunnels_8robots")
+    elif name.endswith(".g2o") and Path(name).is_file():
+        graphs = [read_g2o(Path(name))]
+        name = Path(name).stem
     else:
-        raise UsageError(f"no data set {name!r}; choose one of {', '.join(DATASETS)}")
-    boxes = {graph.name: graph.bbox() for graph in graphs}
-    return Dataset(name, {mission: box for mission, box in boxes.items() if box is not None})
+        raise UsageError(
+            f"no data set {name!r}; choose one of {', '.join(DATASETS)} or a .g2o file"
+        )
+    parts = (mission_part(graph) for graph in graphs)
+    return Dataset(name, {part.name: part for part in parts if part is not None})
 
 
 def grid_for(dataset: Dataset, cells: int) -> SpatialGrid:
@@ -218,12 +242,14 @@ def measure_spatial(
 
     Returns:
         One JSON-ready row per (cell count, latency), in that order: dataset,
-        cells, latency_ms, peers, missions, queries, and per query on average:
-        cells_asked, query_ms and query_ms_all (with and without exact
+        cells, latency_ms, peers, missions, tiles, queries, and per query on
+        average: cells_asked, query_ms and query_ms_all (with and without exact
         filtering), requests (Chord requests sent by the asker), returned_exact
         and returned_all (entries that travelled back), matches (missions
-        found); then mismatches, the queries whose missions differed between
-        the modes (see `check_spatial`).
+        found), tiles_found, rows_moved and bytes_moved (what loading the
+        missions' rows and the tiles found moves), rows_whole and bytes_whole
+        (what loading the whole missions found would); then mismatches, the
+        queries whose chunks differed between the modes (see `check_spatial`).
 
     Raises:
         UsageError: an unknown data set or a cell count that is not square.
@@ -294,15 +320,15 @@ async def _measure(
 
 
 async def _register(data: Dataset, indexes: list[list[SpatialIndex]], rng: random.Random) -> None:
-    """Register every mission, as one chunk held by a random node, in every grid."""
-    for mission, box in data.missions.items():
+    """Register every mission's row and tiles, held by a random node, in every grid."""
+    for mission, part in data.parts.items():
         holder = rng.randrange(len(indexes[0]))
-        # stable ids: the same mission is the same chunk in every grid and run
-        chunk = ChunkId(hashlib.md5(mission.encode(), usedforsecurity=False).hexdigest())
         peer = PeerId(f"{rng.getrandbits(128):032x}")
-        address = indexes[0][holder].chord.me.address
-        ref = SpatialRef(chunk, "vertices", box, (mission,), ((peer, address),))
-        await asyncio.gather(*(index[holder].register(ref, _TTL) for index in indexes))
+        held = ((peer, indexes[0][holder].chord.me.address),)
+        refs = [SpatialRef(part.chunk, "missions", part.bbox, (mission,), held)]
+        refs += [SpatialRef(t.chunk, "vertices", t.bbox, (mission,), held) for t in part.tiles]
+        for ref in refs:
+            await asyncio.gather(*(index[holder].register(ref, _TTL) for index in indexes))
 
 
 async def _connect(nodes: Sequence[ChordNode]) -> None:
@@ -319,14 +345,14 @@ async def _row(
     number of queries whose missions differed between the modes."""
     exact: list[tuple[float, QueryStats]] = []
     every: list[tuple[float, QueryStats]] = []
-    matches: list[int] = []
+    moved: list[Moved] = []
     mismatches = 0
     for box, asker in zip(plan.boxes, plan.askers, strict=True):
         found, timed = await _timed_query(index[asker], box, exact_at_owner=True)
         found_all, timed_all = await _timed_query(index[asker], box, exact_at_owner=False)
         exact.append(timed)
         every.append(timed_all)
-        matches.append(len(found))
+        moved.append(Moved.of(data.parts, found))
         if found != found_all:
             mismatches += 1
             log.warning("query %s: %s with exact filtering, %s without", box, found, found_all)
@@ -336,6 +362,7 @@ async def _row(
         "latency_ms": round(shape.latency * 1e3, 3),
         "peers": len(index),
         "missions": len(data.missions),
+        "tiles": len(data.tiles),
         "queries": len(plan.boxes),
         "cells_asked": _mean(s.cells for _, s in exact),
         "query_ms": _mean(ms for ms, _ in exact),
@@ -343,20 +370,26 @@ async def _row(
         "requests": _mean(s.requests for _, s in exact),
         "returned_exact": _mean(s.transferred for _, s in exact),
         "returned_all": _mean(s.transferred for _, s in every),
-        "matches": _mean(matches),
+        "matches": _mean(len(m.missions) for m in moved),
+        "tiles_found": _mean(m.tiles for m in moved),
+        "rows_moved": _mean(m.rows for m in moved),
+        "bytes_moved": _mean(m.bytes for m in moved),
+        "rows_whole": _mean(m.rows_whole for m in moved),
+        "bytes_whole": _mean(m.bytes_whole for m in moved),
         "mismatches": mismatches,
     }
 
 
 async def _timed_query(
     index: SpatialIndex, box: BBox, *, exact_at_owner: bool
-) -> tuple[set[str], tuple[float, QueryStats]]:
-    """The missions one query finds, its wall time in ms and its stats."""
+) -> tuple[set[ChunkId], tuple[float, QueryStats]]:
+    """The chunks (mission rows and tiles) one query finds, its wall time in ms
+    and its stats."""
     stats = QueryStats()
     began = time.perf_counter()
     refs = await index.query(box, exact_at_owner=exact_at_owner, stats=stats)
     elapsed = (time.perf_counter() - began) * 1e3
-    return {mission for ref in refs for mission in ref.missions}, (elapsed, stats)
+    return {ref.chunk for ref in refs}, (elapsed, stats)
 
 
 def _mean(values: Iterable[float]) -> float:

@@ -61,6 +61,17 @@ def records(title: str, rows: Sequence[dict[str, Any]], columns: Sequence[str]) 
     table(title, [c.replace("_", " ") for c in columns], [[r[c] for c in columns] for r in rows])
 
 
+def size_text(count: int) -> str:
+    """Bytes for humans: 512 B, 3.4 kB, 1.2 MB."""
+    if count < 1000:
+        return f"{count} B"
+    units = ("kB", "MB", "GB")
+    value, unit = count / 1000, 0
+    while value >= 1000 and unit < len(units) - 1:
+        value, unit = value / 1000, unit + 1
+    return f"{value:.1f} {units[unit]}"
+
+
 BOX_STEP = 0.1  # metres: what a person reading a box needs, not the float's 17 digits
 
 

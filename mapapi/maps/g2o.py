@@ -196,7 +196,8 @@ def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -
     byte (less its comments, blank and FIX lines). Other records are written
     from their values, floats in their shortest exact form, so a 3D export
     reads back to the same numbers. Edges to other missions' vertices cannot be
-    expressed in one g2o file and are left out.
+    expressed in one g2o file and are left out, as are edges to vertices the
+    graph lacks (a mission held here in part: its tiles outside a box loaded).
 
     Args:
         planar: write VERTEX_SE2/EDGE_SE2; default: when the graph came from 2D.
@@ -213,7 +214,8 @@ def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -
         origin = graph.origins.get(index, NO_ORIGIN)
         lines.append((origin.line, 0, index, _vertex_line(index, pose, origin, planar)))
     for position, edge in enumerate(graph.edges):
-        if edge.source[0] == graph.name and edge.target[0] == graph.name:
+        ends = (edge.source, edge.target)
+        if all(m == graph.name and i in graph.vertices for m, i in ends):
             lines.append((edge.origin.line, 1, position, _edge_line(edge, planar)))
     lines.sort(key=lambda record: record[:3])
     out.writelines(f"{text}\n" for *_, text in lines)

@@ -1,7 +1,9 @@
 """Store missions in a peer: one transaction per mission, all or nothing.
 
-A pose graph gets one chunk per table (missions, vertices, edges), a point
-cloud one chunk of missions and one of point-cloud blocks. Everything is built
+A pose graph gets a chunk for its mission row and, per spatial tile
+(`mapapi.maps.tiles`), a chunk of the tile's vertices and one of its edges (none
+for a tile without edges); the mission row lists the tiles. A point cloud gets
+one chunk for its mission row and one of point-cloud blocks. Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
 checks every name of a set before the first commit, so a clash stops the set
@@ -34,6 +36,7 @@ from mapapi.maps.schema import (
     vertex_to_pb,
 )
 from mapapi.maps.stored import mission_names, reading
+from mapapi.maps.tiles import Tile, TileChunks, tile_graph
 
 if TYPE_CHECKING:
     from google.protobuf.message import Message
@@ -51,7 +54,13 @@ _PROGRESS_EVERY = 10_000
 @dataclass(frozen=True)
 class ImportResult:
     """What one mission's import wrote (`points` for a cloud, vertices and edges
-    for a graph)."""
+    for a graph).
+
+    Attributes:
+        chunks: table -> chunk, for the tables of one chunk per mission (the
+            mission row's, a cloud's blocks).
+        tiles: a graph's tiles, each in chunks of its own.
+    """
 
     mission: str
     robot: str
@@ -62,10 +71,16 @@ class ImportResult:
     commit: CommitId
     points: int = 0
     commit_seconds: float = 0.0  # of the import's time, what the commit itself took
+    tiles: tuple[TileChunks, ...] = ()
 
     def elements(self) -> int:
         """Vertices plus edges: the unit of the import speed target."""
         return self.vertices + self.edges
+
+    def all_chunks(self) -> list[ChunkId]:
+        """Every chunk the import created."""
+        tiled = [c for t in self.tiles for c in (t.vertices, t.edges) if c is not None]
+        return [*self.chunks.values(), *tiled]
 
 
 async def ensure_tables(peer: Peer, tables: Mapping[str, type[Message]] = GRAPH_TABLES) -> None:
@@ -146,11 +161,22 @@ def build_cloud_rows(cloud: PointCloud) -> dict[str, list[Message]]:
 
 
 @dataclass(frozen=True)
+class _Part:
+    """The rows of one chunk to create: of `table`, and of a tile when `tile` is set."""
+
+    table: str
+    rows: list[Message]
+    tile: Tile | None = None
+
+
+@dataclass(frozen=True)
 class _Prepared:
-    """One mission's rows, built and checked, ready to commit."""
+    """One mission's rows, built and checked, ready to commit: the mission row
+    first, then one part per chunk to create."""
 
     source: MapSource
-    rows: dict[str, list[Message]]
+    mission: Mission
+    parts: list[_Part]
     tables: Mapping[str, type[Message]]
     summary: str
 
@@ -159,23 +185,40 @@ def _prepare(source: MapSource) -> _Prepared:
     if isinstance(source, PointCloud):
         rows = build_cloud_rows(source)
         summary = f"{len(source.points)} points in {len(rows[CLOUDS])} blocks"
-        return _Prepared(source, rows, CLOUD_TABLES, summary)
-    summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges"
-    return _Prepared(source, build_rows(source), GRAPH_TABLES, summary)
+        blocks = [_Part(CLOUDS, rows[CLOUDS])]
+        return _Prepared(source, rows[MISSIONS][0], blocks, CLOUD_TABLES, summary)
+    rows = build_rows(source)
+    tiles = tile_graph(source)
+    summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"
+    # build_rows keeps the graph's order: vertex rows by `vertices`, edge rows by `edges`
+    at = {index: n for n, index in enumerate(source.vertices)}
+    parts = []
+    for tile in tiles:
+        parts.append(_Part(VERTICES, [rows[VERTICES][at[i]] for i in tile.vertices], tile))
+        if tile.edges:
+            parts.append(_Part(EDGES, [rows[EDGES][n] for n in tile.edges], tile))
+    return _Prepared(source, rows[MISSIONS][0], parts, GRAPH_TABLES, summary)
 
 
 async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) -> ImportResult:
     source = prepared.source
-    chunks, commit, seconds = await _commit_rows(
-        peer, source.name, prepared.rows, prepared.tables, prepared.summary, progress
-    )
+    written = await _commit_rows(peer, prepared, progress)
     log.info("imported mission %s (%s)", source.name, prepared.summary)
     if isinstance(source, PointCloud):
         vertices, edges, points = 0, 0, len(source.points)
     else:
         vertices, edges, points = len(source.vertices), len(source.edges), 0
     return ImportResult(
-        source.name, source.robot, vertices, edges, source.bbox(), chunks, commit, points, seconds
+        source.name,
+        source.robot,
+        vertices,
+        edges,
+        source.bbox(),
+        written.chunks,
+        written.commit,
+        points,
+        written.seconds,
+        written.tiles,
     )
 
 
@@ -257,63 +300,84 @@ async def _held(peer: Peer) -> set[str]:
         return await mission_names(tx)
 
 
-async def _commit_rows(
-    peer: Peer,
-    name: str,
-    rows: dict[str, list[Message]],
-    tables: Mapping[str, type[Message]],
-    summary: str,
-    progress: Progress | None,
-) -> tuple[dict[str, ChunkId], CommitId, float]:
-    """Stage one mission's rows in new chunks (one per table) and commit them;
-    on any failure, forget the staged rows and the chunks. Returns the chunks,
-    the commit and the seconds the commit took."""
-    await ensure_tables(peer, tables)
+@dataclass(frozen=True)
+class _Written:
+    chunks: dict[str, ChunkId]
+    tiles: tuple[TileChunks, ...]
+    commit: CommitId
+    seconds: float  # what the commit itself took
+
+
+async def _commit_rows(peer: Peer, prepared: _Prepared, progress: Progress | None) -> _Written:
+    """Stage one mission's rows in new chunks (one per part) and commit them; on
+    any failure, forget the staged rows and the chunks."""
+    name = prepared.source.name
+    await ensure_tables(peer, prepared.tables)
     tx = peer.begin()
     if name in await mission_names(tx):
         tx.abort()
         raise MapImportError(f"mission {name!r} exists already; pass another name")
-    chunks: dict[str, ChunkId] = {}
+    created: list[ChunkId] = []
     try:
-        for table in rows:
-            chunks[table] = await peer.create_chunk(table)
-        # the row names every chunk of the mission: a peer that finds it by its
-        # box can then load the edges, which the spatial index cannot place
-        mission = rows[MISSIONS][0]
-        assert isinstance(mission, Mission)
-        mission.chunks.update(chunks)
-        await peer.off_loop(_stage, tx, rows, chunks, progress)  # encodes every row
+        created.append(await peer.create_chunk(MISSIONS))
+        for part in prepared.parts:
+            created.append(await peer.create_chunk(part.table))
+        chunks, tiles = _name_chunks(prepared, created)
+        await peer.off_loop(_stage, tx, prepared, created, progress)  # encodes every row
         started = time.perf_counter()
-        record = await tx.commit(f"import mission {name}: {summary}")
+        record = await tx.commit(f"import mission {name}: {prepared.summary}")
     except BaseException:
-        await _undo(peer, tx, chunks)
+        await _undo(peer, tx, created)
         raise
     assert record is not None  # a mission row is always written
-    return chunks, record.id, time.perf_counter() - started
+    return _Written(chunks, tiles, record.id, time.perf_counter() - started)
+
+
+def _name_chunks(
+    prepared: _Prepared, created: Sequence[ChunkId]
+) -> tuple[dict[str, ChunkId], tuple[TileChunks, ...]]:
+    """Write the chunks into the mission row (a peer that finds the mission by
+    its box then learns where its tiles' edges are, which the spatial index
+    cannot place), and return them: table -> chunk for the untiled parts, and
+    the tiles."""
+    mission = prepared.mission
+    chunks = {MISSIONS: created[0]}
+    tiles: dict[int, TileChunks] = {}
+    for part, chunk in zip(prepared.parts, created[1:], strict=True):
+        if part.tile is None:
+            chunks[part.table] = chunk
+        elif part.table == VERTICES:
+            tile = part.tile
+            tiles[id(tile)] = TileChunks(
+                chunk, None, tile.bbox, len(tile.vertices), len(tile.edges)
+            )
+        else:
+            tiles[id(part.tile)] = replace(tiles[id(part.tile)], edges=chunk)
+    mission.chunks.update(chunks)
+    mission.tiles.extend(t.to_pb() for t in tiles.values())
+    return chunks, tuple(tiles.values())
 
 
 def _stage(
-    tx: Transaction,
-    rows: dict[str, list[Message]],
-    chunks: dict[str, ChunkId],
-    progress: Progress | None,
+    tx: Transaction, prepared: _Prepared, created: Sequence[ChunkId], progress: Progress | None
 ) -> None:
-    total = sum(len(r) for r in rows.values())
+    parts = [_Part(MISSIONS, [prepared.mission]), *prepared.parts]
+    total = sum(len(p.rows) for p in parts)
     done = 0
-    for table, messages in rows.items():
-        for start in range(0, len(messages), _PROGRESS_EVERY):
-            batch = messages[start : start + _PROGRESS_EVERY]
-            tx.insert_many(table, batch, chunks[table])
+    for part, chunk in zip(parts, created, strict=True):
+        for start in range(0, len(part.rows), _PROGRESS_EVERY):
+            batch = part.rows[start : start + _PROGRESS_EVERY]
+            tx.insert_many(part.table, batch, chunk)
             done += len(batch)
             if progress is not None:
                 progress(done, total)
 
 
-async def _undo(peer: Peer, tx: Transaction, chunks: dict[str, ChunkId]) -> None:
+async def _undo(peer: Peer, tx: Transaction, chunks: Sequence[ChunkId]) -> None:
     """Forget a failed import's staged rows and its (empty) chunks."""
     try:
         tx.abort()
     except Exception:  # already closed by a failed commit; nothing is buffered then
         log.debug("transaction could not be aborted", exc_info=True)
-    for chunk in chunks.values():
+    for chunk in chunks:
         await peer.leave_chunk(chunk, force=True)

@@ -13,9 +13,11 @@ imported when first used: every `mapctl` command imports this.
 
 `load_bbox` makes "load what lies in this box" one operation, so the CLI and
 `mapctl demo` share it: participate in every chunk found that is not held
-here, then in the other chunks of each mission found. A mission's edges have
-no position, so the spatial index never lists their chunk; the mission's row
-names it (`Mission.chunks`), and it is read once the row's chunk is here.
+here, then in the chunks of each mission found that the box needs: the
+spatial tiles of its graph that overlap the box (`mapapi.maps.tiles`), each
+with its vertices and its edges. Edges have no position, so the spatial index
+never lists their chunks; the mission's row names them (`Mission.tiles`), and
+it is read once the row's chunk is here.
 `load_progress` answers how far a running `load_bbox` got.
 """
 
@@ -41,6 +43,7 @@ from mapapi.service.transfer_ops import online, placed_json
 if TYPE_CHECKING:
     from mapapi.maps.importer import ImportResult
     from mapapi.maps.stored import MissionInfo
+    from mapapi.maps.tiles import TileChunks
     from mapapi.net.messages import Member
     from mapapi.service.peer import Peer
 
@@ -62,7 +65,19 @@ def import_json(result: ImportResult) -> Json:
         "points": result.points,
         "bbox": _box(result.bbox),
         "chunks": dict(result.chunks),
+        "tiles": [tile_json(t) for t in result.tiles],
         "commit": result.commit,
+    }
+
+
+def tile_json(tile: TileChunks) -> Json:
+    """One spatial tile of a mission: its box, chunks and counts."""
+    return {
+        "bbox": _box(tile.bbox),
+        "vertices": tile.vertices,
+        "edges": tile.edges,
+        "vertex_count": tile.vertex_count,
+        "edge_count": tile.edge_count,
     }
 
 
@@ -182,6 +197,7 @@ class MapOperations:
             "points": info.points,
             "bbox": _box(info.bbox),
             "chunks": dict(info.chunks),
+            "tiles": [tile_json(t) for t in info.tiles],
             "holders": [self._holder(p) for p in info.holders],
             "held": True,
         }
@@ -239,15 +255,18 @@ class MapOperations:
 
     async def load_bbox(self, bbox: list[float], table: str | None = None) -> Json:
         """Participate in every chunk in `bbox` (of `table`) not held here, and in
-        the other chunks of the missions found; the query's results afterwards
-        (every chunk now held) and `loaded`: each chunk fetched, in order.
+        the chunks of the missions found that the box needs: their tiles that
+        overlap it (`MissionParts.in_box`). Returns the query's results afterwards
+        (every chunk now held), `loaded`: each chunk fetched, in order, with its
+        rows and their bytes, and `items` and `bytes`: what was fetched in all.
 
         Raises:
             PeerNotRunning: a chunk must be fetched but the peer is off the network.
         """
-        from mapapi.maps.stored import mission_chunks
+        from mapapi.maps.stored import mission_parts
 
         key = _load_key(bbox, table)
+        box = BBox.from_tuple(bbox)
         found = await self._query(bbox, table)
         todo = [ChunkId(r["chunk"]) for r in found if not r["held"]]
         loaded: list[Json] = []
@@ -256,14 +275,19 @@ class MapOperations:
             loaded += [await self._load(key, chunk, todo) for chunk in todo]
             names = {name for r in found for name in r["missions"]}
             held = set(self.peer.store.chunk_ids())
-            parts = await mission_chunks(self.peer, names)
-            more = sorted({c for tables in parts.values() for c in tables.values()} - held)
+            parts = await mission_parts(self.peer, names)
+            more = sorted({c for p in parts.values() for c in p.in_box(box)} - held)
             todo += more
             loaded += [await self._load(key, chunk, todo) for chunk in more]
         finally:
             self._loads.pop(key, None)
         results = await self._query(bbox, table) if loaded else found
-        return {"results": results, "loaded": loaded}
+        return {
+            "results": results,
+            "loaded": loaded,
+            "items": sum(c["items"] for c in loaded),
+            "bytes": sum(c["bytes"] for c in loaded),
+        }
 
     async def _query(self, bbox: list[float], table: str | None) -> list[Json]:
         found = await self.peer.query_bbox(BBox.from_tuple(bbox), table)
@@ -274,7 +298,8 @@ class MapOperations:
         table = await peer.participate(chunk)
         self._loads[key] = (todo.index(chunk) + 1, len(todo))
         counted = await peer.off_loop(peer.store.chunks, None, chunk)  # that chunk's rows only
-        return {"chunk": chunk, "table": table, "items": counted[0].items if counted else 0}
+        items, size = (counted[0].items, counted[0].bytes) if counted else (0, 0)
+        return {"chunk": chunk, "table": table, "items": items, "bytes": size}
 
     async def load_progress(self, bbox: list[float], table: str | None = None) -> Json:
         """How far a running `load_bbox(bbox, table)` got: chunks loaded of the
@@ -299,6 +324,7 @@ def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:
         "points": None,
         "bbox": _box(box),
         "chunks": {},
+        "tiles": [],
         "holders": holders,
         "held": False,
     }

@@ -149,13 +149,18 @@ def _trajectories(
     links: list[tuple[tuple[float, float], tuple[float, float]]] = []
     for graph in graphs:
         colour = colours[graph.name]
-        xy = np.array([(p[u], p[v]) for _, p in sorted(graph.vertices.items())])
         name = labels.get(graph.name) or graph.robot or graph.name
         label = None if name in labelled else name
         labelled.add(name)
-        ax.plot(xy[:, 0], xy[:, 1], color=colour, linewidth=1.0, label=label)
-        ax.plot(xy[0, 0], xy[0, 1], marker="o", color=colour, markersize=4)
-        loops = [(where[e.source], where[e.target]) for e in graph.edges if e.kind is EdgeKind.LOOP]
+        for n, xy in enumerate(_runs(graph, u, v)):
+            ax.plot(xy[:, 0], xy[:, 1], color=colour, linewidth=1.0, label=None if n else label)
+        start = where[graph.name, min(graph.vertices)]
+        ax.plot(*start, marker="o", color=colour, markersize=4)
+        loops = [
+            (where[e.source], where[e.target])
+            for e in graph.edges
+            if e.kind is EdgeKind.LOOP and e.source in where and e.target in where
+        ]
         ax.add_collection(LineCollection(loops, colors=colour, linewidths=0.6, alpha=0.5))
         links += [
             (where[e.source], where[e.target])
@@ -169,6 +174,18 @@ def _trajectories(
             LineCollection(links, colors="black", linewidths=0.3, alpha=0.07, linestyles="dashed")
         )
         ax.plot([], [], color="black", linewidth=0.6, linestyle="--", label="inter-robot edges")
+
+
+def _runs(graph: MissionGraph, u: int, v: int) -> list[Any]:
+    """The trajectory's (u, v) points in index order, cut where indices skip more
+    than their usual step: a mission held in part (the tiles in a box) is drawn
+    as the pieces held, not joined by lines across what is missing."""
+    indices = np.array(sorted(graph.vertices))
+    xy = np.array([(graph.vertices[i][u], graph.vertices[i][v]) for i in indices])
+    steps = np.diff(indices)
+    if not len(steps):
+        return [xy]
+    return np.split(xy, np.nonzero(steps > steps.min())[0] + 1)
 
 
 def _inside(ax: Any, graphs: Sequence[MissionGraph], box: BBox, u: int, v: int) -> None:

@@ -25,6 +25,7 @@ MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS = (
 )
 
 Mission = maps_pb2.Mission
+TilePb = maps_pb2.Tile
 Vertex = maps_pb2.Vertex
 Edge = maps_pb2.Edge
 Landmark = maps_pb2.Landmark

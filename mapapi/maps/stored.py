@@ -35,6 +35,7 @@ from mapapi.maps.schema import (
     edge_from_pb,
     pose_from_pb,
 )
+from mapapi.maps.tiles import TileChunks
 
 if TYPE_CHECKING:
     from mapapi.core.history import Revision
@@ -49,7 +50,9 @@ class MissionInfo:
     """A summary of one mission held here.
 
     Attributes:
-        chunks: table -> the chunk of that table holding the mission's rows.
+        chunks: table -> the chunk of that table holding the mission's rows, for
+            the tables not tiled (all of them for a mission imported before tiles).
+        tiles: its graph's spatial tiles, as its row lists them.
         holders: the peers holding the mission row's chunk.
     """
 
@@ -61,6 +64,7 @@ class MissionInfo:
     edges: int = 0
     points: int = 0
     chunks: dict[str, ChunkId] = field(default_factory=dict)
+    tiles: tuple[TileChunks, ...] = ()
     holders: list[PeerId] = field(default_factory=list)
 
     @property
@@ -198,23 +202,53 @@ def cloud_at(peer: Peer, time: int, mission: str) -> PointCloud:
     return cloud_from_blocks(mission, row.robot, row.frame, blocks)
 
 
-async def mission_chunks(peer: Peer, names: Iterable[str]) -> dict[str, dict[str, ChunkId]]:
-    """Mission name -> {table: chunk} for the missions of `names` held here, as
-    their rows name them (rows written before rows named their chunks name none)."""
+@dataclass(frozen=True)
+class MissionParts:
+    """Where a mission's rows are, as its mission row names them.
+
+    Attributes:
+        chunks: table -> chunk, for the tables of one chunk per mission (the
+            mission row's, a cloud's; a graph's vertices and edges too when it
+            was imported before tiles).
+        tiles: the graph's spatial tiles (`mapapi.maps.tiles`).
+    """
+
+    chunks: dict[str, ChunkId]
+    tiles: tuple[TileChunks, ...] = ()
+
+    def in_box(self, box: BBox) -> set[ChunkId]:
+        """The chunks a load of `box` needs: the untiled ones, and the chunks of
+        every tile whose box overlaps `box`."""
+        tiled = {c for t in self.tiles if t.bbox.overlaps(box) for c in t.chunks()}
+        return set(self.chunks.values()) | tiled
+
+
+async def mission_parts(peer: Peer, names: Iterable[str]) -> dict[str, MissionParts]:
+    """Mission name -> where its rows are, for the missions of `names` held here,
+    as their rows name them (rows written before rows named their chunks name
+    none; a row written by hand with ids that are not ids names none either)."""
     wanted = set(names)
     if not wanted or MISSIONS not in peer.store.tables():
         return {}
     async with read_time(peer, sorted(wanted), (MISSIONS,)) as time:
         rows = await peer.off_loop(_mission_rows, peer, time, sorted(wanted))
-    found: dict[str, dict[str, ChunkId]] = {}
-    for row in rows:
-        found[row.name] = {}
-        for table, chunk in row.chunks.items():
-            try:
-                found[row.name][table] = ChunkId(chunk)
-            except ValueError:  # a row written by hand, not by an import
-                log.warning("mission %s names no chunk id for %s: %r", row.name, table, chunk)
-    return found
+    return {row.name: _parts_of(row) for row in rows}
+
+
+def _parts_of(row: Any) -> MissionParts:
+    chunks: dict[str, ChunkId] = {}
+    for table, chunk in row.chunks.items():
+        try:
+            chunks[table] = ChunkId(chunk)
+        except ValueError:
+            log.warning("mission %s names no chunk id for %s: %r", row.name, table, chunk)
+    tiles = []
+    for tile in row.tiles:
+        try:
+            tiles.append(TileChunks.from_pb(tile))
+        except ValueError as exc:
+            log.warning("mission %s names a tile that is not one: %s", row.name, exc)
+    return MissionParts(chunks, tuple(tiles))
 
 
 def _mission_rows(peer: Peer, time: int, names: list[str]) -> list[Any]:
@@ -241,14 +275,16 @@ def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
     for revision in rows:
         row: Any = decode(revision.data)
         box = box_from_pb(row.bbox) if row.HasField("bbox") else None
-        infos[row.name] = MissionInfo(row.name, row.robot, row.frame, box)
+        tiles = _parts_of(row).tiles
+        infos[row.name] = MissionInfo(row.name, row.robot, row.frame, box, tiles=tiles)
         infos[row.name].chunks[MISSIONS] = revision.chunk_id
     boxes: dict[str, list[BBox]] = {}
     for summary in peer.label_summaries(MAP_LABELS):
         info = infos.get(summary.label)
         if info is None or summary.table == MISSIONS:
             continue  # rows whose mission row is not held here
-        info.chunks.setdefault(summary.table, summary.chunk)
+        if not (info.tiles and summary.table in (VERTICES, EDGES)):
+            info.chunks.setdefault(summary.table, summary.chunk)
         if summary.table == VERTICES:
             info.vertices += summary.items
         elif summary.table == EDGES:

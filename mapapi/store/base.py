@@ -16,11 +16,13 @@ IdKind = Literal["item", "chunk", "commit"]
 
 @dataclass(frozen=True, slots=True)
 class ChunkInfo:
-    """A chunk known locally: its id, its table and how many live items it holds now."""
+    """A chunk known locally: its id, its table, how many live items it holds now
+    and their payloads' bytes."""
 
     id: ChunkId
     table: str
     items: int
+    bytes: int = 0
 
 
 @dataclass(frozen=True, slots=True)

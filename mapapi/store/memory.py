@@ -87,14 +87,15 @@ class MemoryStore(MemoryChains):
             self._factors[chunk_id] = factor
 
     def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
-        """The chunks, with their live item counts now (`only`: just that one, if held)."""
-        counts: dict[ChunkId, int] = dict.fromkeys(self._chunks, 0)
+        """The chunks, with their live items' count and bytes now (`only`: that one, if held)."""
+        counts: dict[ChunkId, list[int]] = {cid: [0, 0] for cid in self._chunks}
         for history in self._items.values():
             latest = history.latest()
             if latest is not None and not latest.removed:
-                counts[latest.chunk_id] += 1
+                counts[latest.chunk_id][0] += 1
+                counts[latest.chunk_id][1] += len(latest.data)
         return [
-            ChunkInfo(cid, t, counts[cid])
+            ChunkInfo(cid, t, *counts[cid])
             for cid, t in sorted(self._chunks.items())
             if (table is None or t == table) and (only is None or cid == only)
         ]

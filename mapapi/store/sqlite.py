@@ -118,15 +118,16 @@ class SqliteStore(SqliteChains, SqliteViews):
             con.execute("UPDATE chunks SET replication = ? WHERE id = ?", (factor, chunk_id))
 
     def chunks(self, table: str | None = None, only: ChunkId | None = None) -> list[ChunkInfo]:
-        """Chunks with their live item counts now (`only`: just that one, if held)."""
+        """Chunks with their live item counts and bytes now (`only`: just that one, if held)."""
         sql = """
-            SELECT c.id, c.table_name, COUNT(r.item_id) FROM chunks c
+            SELECT c.id, c.table_name, COUNT(r.item_id), COALESCE(SUM(LENGTH(r.data)), 0)
+            FROM chunks c
             LEFT JOIN revisions r ON r.chunk_id = c.id AND r.removed = 0
              AND r.update_time = (SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)
             WHERE (? IS NULL OR c.table_name = ?) AND (? IS NULL OR c.id = ?)
             GROUP BY c.id ORDER BY c.id"""
         rows = self._con().execute(sql, (table, table, only, only))
-        return [ChunkInfo(ChunkId(c), t, n) for c, t, n in rows]
+        return [ChunkInfo(ChunkId(c), t, n, b) for c, t, n, b in rows]
 
     def chunk_ids(self, table: str | None = None) -> list[ChunkId]:
         """The ids of `chunks(table)`, in order, without counting their items."""

@@ -5,8 +5,9 @@ the tunnels map together, finds and loads it by region, and settles a conflict.
 2. import: each peer imports a few robots' missions of the Kimera-Multi
    tunnels set (`sample_maps/`), all peers at once.
 3. query: the last peer asks the spatial index for the box around the spot
-   where every robot's trajectory starts and loads every mission found, with
-   its edges (`load_bbox`, what `query-bbox --load` runs).
+   where every robot's trajectory starts and loads what lies in it: each
+   mission's row and its spatial tiles in the box, with their edges
+   (`load_bbox`, what `query-bbox --load` runs).
 4. conflict: the first and the last peer edit the same vertex in views begun
    before either commits; the first commits, the last one's commit conflicts,
    it resolves with the mean of both edits and commits again; both peers read
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from mapapi.core.errors import ConflictError, MapError
+from mapapi.lookup.spatial import BBox
 from mapbench.demo.swarm import LocalSwarm, SwarmPeer
 
 Json = Any
@@ -47,6 +49,32 @@ EDITS = ((0.5, 0.0, 0.0), (0.0, 0.0, 0.3))
 
 class DemoFailed(MapError):
     """The swarm did not do what the demo shows (a bug: see the peers' logs)."""
+
+
+def _tiles_in_box(mission: Json) -> list[Json]:
+    """The spatial tiles of a mission (as `missions` or `import_map` list them)
+    whose box overlaps `QUERY_BOX`."""
+    box = BBox.from_tuple(QUERY_BOX)
+    return [t for t in mission["tiles"] if BBox.from_tuple(t["bbox"]).overlaps(box)]
+
+
+def _held_in_box(name: str, held: Json | None, imported: Json, own: bool) -> Json:
+    """What the querying peer holds of a mission: complete when it holds the
+    mission's row and every tile of it in the box (as the importer listed them),
+    and nothing of the others; or, when it imported the mission (`own`), all of it."""
+    wanted = imported["tiles"] if own else _tiles_in_box(imported)
+    vertices = sum(t["vertex_count"] for t in wanted)
+    edges = sum(t["edge_count"] for t in wanted)
+    counts = (held["vertices"], held["edges"]) if held is not None else (0, 0)
+    return {
+        "name": name,
+        "vertices": counts[0],
+        "edges": counts[1],
+        "tiles": len(wanted),
+        "of_tiles": len(imported["tiles"]),
+        "holders": [h["name"] for h in held["holders"]] if held is not None else [],
+        "complete": held is not None and counts == (vertices, edges),
+    }
 
 
 def robot_files(tunnels: Path) -> list[Path]:
@@ -177,20 +205,12 @@ class Demo:
         held = {m["name"]: m for m in (await asker.call("missions"))["missions"]}
         imported = {m["name"]: m for m in missions}
         rows = [
-            {
-                "name": name,
-                "vertices": held[name]["vertices"] if name in held else 0,
-                "edges": held[name]["edges"] if name in held else 0,
-                "holders": [h["name"] for h in held[name]["holders"]] if name in held else [],
-                "complete": name in held
-                and (held[name]["vertices"], held[name]["edges"])
-                == (imported[name]["vertices"], imported[name]["edges"]),
-            }
-            for name in sorted(imported)
+            _held_in_box(name, held.get(name), m, own=m["peer"] == asker.name)
+            for name, m in sorted(imported.items())
         ]
         missing = [r["name"] for r in rows if not r["complete"]]
         if missing:
-            raise DemoFailed(f"{asker.name} lacks missions after loading: {', '.join(missing)}")
+            raise DemoFailed(f"{asker.name} lacks what lies in the box of: {', '.join(missing)}")
         received = (await asker.call("traffic"))["received"]["bytes"] - before
         return {
             "peer": asker.name,
@@ -206,7 +226,8 @@ class Demo:
     async def _conflict(self) -> Json:
         first, second = self.peers[0], self.peers[-1]
         own = (await first.call("missions"))["missions"][0]  # by name: its first import
-        mission, chunk = own["name"], own["chunks"]["vertices"]
+        # a tile in the query box: the last peer loaded it
+        mission, chunk = own["name"], _tiles_in_box(own)[0]["vertices"]
         items = (await first.call("ls", view=VIEW, table="vertices", chunk=chunk))["items"]
         target = min(items, key=lambda i: abs(int(i["data"].get("index", 0)) - 10))
         item, base = target["id"], target["data"]

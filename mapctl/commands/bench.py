@@ -176,7 +176,13 @@ def bench_lookup(
     "--dataset",
     "datasets",
     click.Choice(["parking-garage", "tunnels"]),
-    "Real missions to index (repeat for several; default both).",
+    "Real missions to index (repeat for several; default both, unless --graph is given).",
+)
+@repeatable(
+    "--graph",
+    "graphs",
+    click.Path(exists=True, dir_okay=False),
+    "A .g2o file whose missions make a data set of their own (repeat).",
 )
 @repeatable(
     "--cells", "cells", click.IntRange(1), "Grid cells, n x n (repeat; default 1, 4, ..., 4096)."
@@ -206,6 +212,7 @@ def bench_lookup(
 @json_option
 def bench_spatial(
     datasets: tuple[str, ...],
+    graphs: tuple[str, ...],
     cells: tuple[int, ...],
     latencies: tuple[float, ...],
     peers: int,
@@ -218,18 +225,21 @@ def bench_spatial(
 ) -> None:
     """Spatial-index query cost against grid cells (Map API paper, Fig. 8).
 
-    Real missions (parking-garage segments, tunnels robots) are registered on
-    a ring of N nodes in this process; random boxes are then queried with the
+    Real missions (parking-garage segments, tunnels robots, or a g2o file's)
+    are registered on a ring of N nodes in this process, each by its box and by
+    the boxes of its spatial tiles; random boxes are then queried with the
     exact filter at each cell's owner and without it. Both modes must find the
-    same missions, or the command fails (exit 1). With --json, one object per
-    (dataset, cells, latency), one per line.
+    same chunks, or the command fails (exit 1). Each row also says what a
+    `query-bbox --load` of the findings moves (rows, bytes), against loading
+    the whole missions. With --json, one object per (dataset, cells, latency),
+    one per line.
     """
     from mapbench import spatial
     from mapbench.lookup import environment
 
     machine = environment()  # before the runs, whose own load would count otherwise
     rows = []
-    for dataset in datasets or spatial.DATASETS:
+    for dataset in (*(datasets or ([] if graphs else spatial.DATASETS)), *graphs):
         for row in spatial.measure_spatial(
             dataset,
             cells=cells or spatial.CELLS,
@@ -240,7 +250,9 @@ def bench_spatial(
             fraction=fraction,
             samples=samples or spatial.SAMPLES,
         ):
-            title = f"bench spatial: {dataset}, {row['cells']} cells, {row['latency_ms']:g} ms"
+            title = (
+                f"bench spatial: {row['dataset']}, {row['cells']} cells, {row['latency_ms']:g} ms"
+            )
             measures(title, row, as_json)
             rows.append(row)
     spatial.check_spatial(rows)

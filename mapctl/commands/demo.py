@@ -10,17 +10,6 @@ import click
 from mapctl.session import json_option
 
 
-def _size(count: int) -> str:
-    """Bytes for humans: 512 B, 3.4 kB, 1.2 MB."""
-    if count < 1000:
-        return f"{count} B"
-    units = ("kB", "MB", "GB")
-    value, unit = count / 1000, 0
-    while value >= 1000 and unit < len(units) - 1:
-        value, unit = value / 1000, unit + 1
-    return f"{value:.1f} {units[unit]}"
-
-
 def _xyz(values: list[float]) -> str:
     return "(" + ", ".join(f"{v:.2f}" for v in values) + ")"
 
@@ -70,8 +59,8 @@ def _render(summary: dict[str, Any]) -> None:
                 ", ".join(n.removeprefix("tunnels-") for n in p["imported"]),
                 p["chunks"],
                 p["commits"],
-                _size(p["sent"]["bytes"]),
-                _size(p["received"]["bytes"]),
+                render.size_text(p["sent"]["bytes"]),
+                render.size_text(p["received"]["bytes"]),
             )
             for p in summary["peers"]
         ],
@@ -80,13 +69,20 @@ def _render(summary: dict[str, Any]) -> None:
     render.line(
         f"{query['peer']} asked for the box {' '.join(f'{v:g}' for v in query['bbox'])}: "
         f"{len(query['found'])} missions, {query['loaded_chunks']} chunks loaded "
-        f"({_size(query['bytes_received'])}) in {query['seconds']:.2f} s"
+        f"({render.size_text(query['bytes_received'])}) in {query['seconds']:.2f} s"
     )
     render.table(
         f"missions on {query['peer']} after the query",
-        ["mission", "vertices", "edges", "holders", "complete"],
+        ["mission", "vertices", "edges", "tiles", "holders", "complete"],
         [
-            (m["name"], m["vertices"], m["edges"], ", ".join(m["holders"]), m["complete"])
+            (
+                m["name"],
+                m["vertices"],
+                m["edges"],
+                f"{m['tiles']} of {m['of_tiles']}",
+                ", ".join(m["holders"]),
+                m["complete"],
+            )
             for m in query["missions"]
         ],
     )
@@ -102,11 +98,14 @@ def _render(summary: dict[str, Any]) -> None:
     render.table(
         "steps",
         ["step", "seconds", "bytes sent"],
-        [(s, f"{t:.2f}", _size(moved[s]) if s in moved else "") for s, t in timings.items()],
+        [
+            (s, f"{t:.2f}", render.size_text(moved[s]) if s in moved else "")
+            for s, t in timings.items()
+        ],
     )
     render.line(
         f"{len(summary['peers'])} peers, {summary['chunks']} chunks, {summary['commits']} "
-        f"commits, {_size(summary['bytes_moved'])} moved in {timings['total']:.1f} s",
+        f"commits, {render.size_text(summary['bytes_moved'])} moved in {timings['total']:.1f} s",
         "bold",
     )
     render.line(

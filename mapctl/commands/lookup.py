@@ -18,8 +18,8 @@ from mapctl.session import Session, json_option, pass_session
 @click.option(
     "--load",
     is_flag=True,
-    help="Participate in every chunk found that is not held here, and in the other "
-    "chunks (edges) of the missions found.",
+    help="Participate in every chunk found that is not held here, and in the chunks of "
+    "the missions found that lie in the box: their tiles there, with their edges.",
 )
 @json_option
 @pass_session
@@ -35,7 +35,8 @@ def query_bbox(
     The box is in metres, in the map frame. Off the network only the chunks
     held here are searched; with a running peer the swarm's spatial index is.
     A box partly outside the index's bounds is clamped; one fully outside
-    matches nothing. With --json, --load adds "loaded": the chunks fetched.
+    matches nothing. With --json, --load adds "loaded": the chunks fetched,
+    and "items" and "bytes": the rows fetched and their payloads' size.
     """
     from mapctl import render
 
@@ -52,6 +53,9 @@ def query_bbox(
             for c in info["loaded"]:
                 items = f"{c['items']} item{'' if c['items'] == 1 else 's'}"
                 render.note(f"loaded chunk {c['chunk']} ({c['table']}, {items})")
+            if info["loaded"]:
+                size = render.size_text(info["bytes"])
+                render.note(f"loaded {len(info['loaded'])} chunks: {info['items']} items, {size}")
     else:
         info = session.call("query_bbox", **args)
     results = info["results"]

@@ -38,7 +38,13 @@ class TestImport:
             "edges": 2_512,
             "points": 0,
         }
-        assert set(mission["chunks"]) == {"missions", "vertices", "edges"}
+        assert set(mission["chunks"]) == {"missions"}  # the graph is in tiles
+        assert [t["vertex_count"] for t in mission["tiles"]] == [432] * 4
+        assert sum(t["edge_count"] for t in mission["tiles"]) == 2_512
+        held = {c["id"]: c["items"] for c in mapctl.json("chunk", "list")["chunks"]}
+        for tile in mission["tiles"]:
+            assert held[tile["vertices"]] == tile["vertex_count"]
+            assert held[tile["edges"]] == tile["edge_count"]
         assert [c["commit"] for c in mapctl.json("log")] == [mission["commit"]]
 
     def test_a_kimera_folder_is_one_mission_per_robot(self, mapctl: Mapctl) -> None:
@@ -235,7 +241,7 @@ class TestThroughTheDaemon:
 class TestMissionRules:
     def test_a_second_vertex_100_set_by_hand_exits_2_naming_both(self, intel: Mapctl) -> None:
         """Issue 15: `set` stages it; the commit refuses it and writes nothing."""
-        chunk = intel.json("missions")["missions"][0]["chunks"]["vertices"]
+        chunk = intel.json("missions")["missions"][0]["tiles"][-1]["vertices"]
         bogus = '{"mission": "intel", "index": 100, "pose": {"x": 9.0, "qw": 1.0}}'
         added = intel.json("set", "vertices", bogus, "--chunk", chunk)["id"]
 

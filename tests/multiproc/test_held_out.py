@@ -1,7 +1,9 @@
 """Issue 5, "done when": a real g2o graph the project never saw (MIT Killian Court,
 `tests/data/held_out/`, not in `sample_maps/`) imports on one peer process, and
-another that never saw it finds it with `query-bbox --load` and then holds the
-same graph: the same counts, and an export equal to the importer's and to the file.
+another that never saw it finds it with `query-bbox --load`: a small box loads the
+mission's row and the one spatial tile around it (issue 14 §3), and the mission's
+whole box then the rest, after which it holds the same graph: the same counts,
+and an export equal to the importer's and to the file.
 
 Every step is a real `mapctl` process talking to real peer daemons on 127.0.0.1.
 """
@@ -60,11 +62,20 @@ def test_a_held_out_graph_imported_on_one_peer_is_found_and_loaded_whole_by_anot
     assert {n for r in found["results"] for n in r["missions"]} == {"killian"}
     assert all(r["held"] for r in found["results"])
     assert sorted(c["table"] for c in found["loaded"]) == ["edges", "missions", "vertices"]
+    (mission,) = imported["missions"]
+    (tile,) = [
+        t for t in mission["tiles"] if t["vertices"] in {c["chunk"] for c in found["loaded"]}
+    ]
+    assert found["items"] == 1 + tile["vertex_count"] + tile["edge_count"] < 1 + vertices + edges
+    (part,) = mapctl_json(b.repo, "missions")["missions"]
+    assert (part["vertices"], part["edges"]) == (tile["vertex_count"], tile["edge_count"])
 
+    rest = mapctl_json(b.repo, "query-bbox", *map(str, mission["bbox"]), "--load")
+    assert found["items"] + rest["items"] == 1 + vertices + edges
     on_a = mapctl_json(a.repo, "missions")["missions"]
     on_b = mapctl_json(b.repo, "missions")["missions"]
     assert len(on_a) == len(on_b) == 1
-    for key in ("name", "vertices", "edges", "bbox", "chunks"):
+    for key in ("name", "vertices", "edges", "bbox", "chunks", "tiles"):
         assert on_b[0][key] == on_a[0][key], key
     assert sorted(h["name"] for h in on_b[0]["holders"]) == ["a", "b"]
 

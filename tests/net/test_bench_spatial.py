@@ -39,30 +39,48 @@ KEYS = {
     "returned_exact",
     "returned_all",
     "matches",
+    "tiles",
+    "tiles_found",
+    "rows_moved",
+    "bytes_moved",
+    "rows_whole",
+    "bytes_whole",
     "mismatches",
 }
 
 
-def brute_force_matches(dataset: str, boxes: list[BBox]) -> float:
-    """Missions whose box overlaps each query box, on average: the oracle."""
-    missions = load_dataset(dataset, SAMPLES).missions.values()
-    return statistics.fmean(sum(mission.overlaps(box) for mission in missions) for box in boxes)
+def brute_force(dataset: str, boxes: list[BBox]) -> dict[str, float]:
+    """Per query box on average, the oracle: the missions and tiles whose box
+    overlaps it, and the rows of those tiles plus one per mission's row."""
+    data = load_dataset(dataset, SAMPLES)
+    missions = [sum(m.overlaps(box) for m in data.missions.values()) for box in boxes]
+    tiles = [[t for t in data.tiles if t.bbox.overlaps(box)] for box in boxes]
+    return {
+        "matches": statistics.fmean(missions),
+        "tiles_found": statistics.fmean(len(hit) for hit in tiles),
+        "rows_moved": statistics.fmean(
+            found + sum(t.rows for t in hit) for found, hit in zip(missions, tiles, strict=True)
+        ),
+    }
 
 
 def check_rows(rows: list[dict[str, Any]], dataset: str, cells: list[int], queries: int) -> None:
-    """One row per cell count in order, the promised keys, and matches as brute force."""
+    """One row per cell count in order, the promised keys, and what was found as
+    brute force finds it."""
     boxes = query_boxes(load_dataset(dataset, SAMPLES), queries, seed=3)
-    expected = brute_force_matches(dataset, boxes)
+    expected = brute_force(dataset, boxes)
     assert [row["cells"] for row in rows] == cells
     for row in rows:
         assert set(row) == KEYS
         assert (row["dataset"], row["latency_ms"], row["queries"]) == (dataset, 0, queries)
-        assert row["matches"] == pytest.approx(expected, abs=1e-3)
-        assert row["matches"] <= row["returned_exact"] <= row["returned_all"]
+        assert {k: row[k] for k in expected} == pytest.approx(expected, abs=1e-3)
+        assert row["matches"] + row["tiles_found"] <= row["returned_exact"] <= row["returned_all"]
         assert 1 <= row["cells_asked"] <= row["cells"]
-    first = rows[0]  # one cell holds every mission: all of them travel without filtering
-    assert first["returned_all"] == first["missions"]
-    assert first["returned_exact"] == first["matches"]
+        assert row["rows_moved"] <= row["rows_whole"]
+        assert row["bytes_moved"] <= row["bytes_whole"]
+    first = rows[0]  # one cell holds every chunk: all of them travel without filtering
+    assert first["returned_all"] == first["missions"] + first["tiles"]
+    assert first["returned_exact"] == first["matches"] + first["tiles_found"]
 
 
 class TestGeometry:
@@ -73,6 +91,16 @@ class TestGeometry:
     def test_missions_are_robots_or_garage_segments(self) -> None:
         assert len(load_dataset("tunnels", SAMPLES).missions) == 8
         assert len(load_dataset("parking-garage", SAMPLES).missions) == 17  # 1,661 / 100
+
+    def test_a_g2o_file_is_a_data_set_of_its_tiled_missions(self) -> None:
+        intel = load_dataset(str(SAMPLES / "pose_graphs" / "intel.g2o"))
+        assert (intel.name, list(intel.missions)) == ("intel", ["intel"])
+        (part,) = intel.parts.values()
+        assert len(part.tiles) == 4
+        assert part.rows == 1 + 1_728 + 2_512
+        assert part.bytes == part.row_bytes + sum(t.bytes for t in part.tiles)
+        with pytest.raises(UsageError, match=r"or a \.g2o file"):
+            load_dataset("nowhere")
 
     def test_a_grid_that_is_not_square_is_refused(self) -> None:
         with pytest.raises(UsageError, match="not n x n"):

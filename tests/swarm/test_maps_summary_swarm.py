@@ -38,16 +38,20 @@ async def test_a_mission_imported_elsewhere_is_summarised_here_chunk_by_chunk(
     a, b = await lookup_swarm(make_peer, 2)
     result = await import_graph(a, read_g2o(INTEL), robot="hahnel")
 
-    await b.participate(result.chunks[VERTICES])
-    (vertices,) = b.label_summaries(MAP_LABELS)
-    assert (vertices.label, vertices.table, vertices.items) == ("intel", VERTICES, 1_728)
+    for tile in result.tiles:
+        await b.participate(tile.vertices)
+    tiles = b.label_summaries(MAP_LABELS)
+    assert {(s.label, s.table) for s in tiles} == {("intel", VERTICES)}
+    assert [s.items for s in tiles] == [t.vertex_count for t in result.tiles]
     assert await list_missions(b) == []  # no mission row here yet
 
     await b.participate(result.chunks[MISSIONS])
     (info,) = await list_missions(b)
     assert (info.vertices, info.edges, info.bbox) == (1_728, 0, result.bbox)
 
-    await b.participate(result.chunks[EDGES])
+    for tile in result.tiles:
+        assert tile.edges is not None
+        await b.participate(tile.edges)
     assert await described(b) == await described(a)
     assert (await described(b))[0][2:4] == (1_728, 2_512)
     assert b.label_summaries(MAP_LABELS) == from_scratch(b)
@@ -58,7 +62,7 @@ async def test_commits_of_the_importer_reach_the_summary_of_every_holder(
 ) -> None:
     a, b = await lookup_swarm(make_peer, 2)
     result = await import_graph(a, read_g2o(INTEL))
-    for chunk in result.chunks.values():
+    for chunk in result.all_chunks():
         await b.participate(chunk)
 
     tx = a.begin()
@@ -78,7 +82,9 @@ async def test_commits_of_the_importer_reach_the_summary_of_every_holder(
     assert await described(b) == await described(a)
     assert b.label_summaries(MAP_LABELS) == from_scratch(b)
 
-    await b.leave_chunk(result.chunks[EDGES])
+    for tile in result.tiles:
+        assert tile.edges is not None
+        await b.leave_chunk(tile.edges)
     (info,) = await list_missions(b)
     assert (info.vertices, info.edges) == (1_728, 0)
     assert b.label_summaries(MAP_LABELS) == from_scratch(b)

@@ -54,11 +54,11 @@ async def test_an_imported_graph_is_found_by_its_mission_box_elsewhere(
     assert hit.ref.chunk == result.chunks[MISSIONS]
     assert hit.ref.bbox == result.bbox
     assert ([m.id for m in hit.holders], hit.held) == ([a.id], False)
-    # the vertices are placed too (labelled with their mission); the edges, which
-    # have no place, are not
+    # the vertices are placed too, each tile by its box (labelled with their
+    # mission); the edges, which have no place, are not
     assert await found_by_table(b, BBox(-100, -100, -10, 100, 100, 10)) == {
         MISSIONS: [("intel",)],
-        VERTICES: [("intel",)],
+        VERTICES: [("intel",)] * len(result.tiles),
     }
     assert await c.query_bbox(BBox(50, 50, -1, 60, 60, 1)) == []
 
@@ -101,25 +101,53 @@ async def test_missions_with_swarm_lists_what_others_hold(make_peer: MakePeer) -
     assert (room["name"], room["held"], room["holders"][0]["id"]) == ("room_scan1", True, b.id)
 
 
-async def test_load_bbox_loads_every_chunk_of_the_missions_found(make_peer: MakePeer) -> None:
+async def test_load_bbox_loads_the_mission_row_and_the_tiles_in_the_box(
+    make_peer: MakePeer, tmp_path: Path
+) -> None:
     a, b = await lookup_swarm(make_peer, 2)
     result = await import_graph(a, read_g2o(INTEL), robot="hahnel")
     ops = MapOperations(b)
+    box = [10, -20, -1, 11, -19, 1]
+    (inside,) = [t for t in result.tiles if t.bbox.overlaps(BBox.from_tuple(box))]
+    outside = [t for t in result.tiles if t is not inside]
+    assert outside  # intel has four tiles; the box lies in one
 
-    loaded = await ops.load_bbox([10, -20, -1, 11, -19, 1])
+    loaded = await ops.load_bbox(box)
 
-    # the box finds the row and the vertices; the row names the edges' chunk
-    assert sorted((c["table"], c["chunk"]) for c in loaded["loaded"]) == sorted(
-        (table, chunk) for table, chunk in result.chunks.items()
+    # the box finds the row and the tile's vertices; the row names the tile's edges
+    assert sorted(c["chunk"] for c in loaded["loaded"]) == sorted(
+        [result.chunks[MISSIONS], *inside.chunks()]
     )
     assert {r["table"]: r["held"] for r in loaded["results"]} == {MISSIONS: True, VERTICES: True}
-    items = {c["table"]: c["items"] for c in loaded["loaded"]}
-    assert (items[VERTICES], sum(items.values())) == (1_728, 1 + 1_728 + 2_512)  # each its own
+    items = {c["chunk"]: c["items"] for c in loaded["loaded"]}
+    assert (items[inside.vertices], items[inside.edges]) == (
+        inside.vertex_count,
+        inside.edge_count,
+    )
+    assert loaded["items"] == 1 + inside.vertex_count + inside.edge_count
+    sizes = {c.id: c.bytes for c in a.chunks()}
+    assert loaded["bytes"] == sum(sizes[c["chunk"]] for c in loaded["loaded"]) > 0
+    (info,) = await list_missions(b)
+    assert (info.vertices, info.edges) == (inside.vertex_count, inside.edge_count)
+    # what is held exports and draws: edges to vertices of tiles not held are left out
+    part = await ops.export_map("intel", str(tmp_path / "part.g2o"))
+    assert part["vertices"] == inside.vertex_count
+    assert part["edges"] + part["left_out"] == inside.edge_count
+    assert part["left_out"] > 0  # the tile's edges across its border
+    assert read_g2o(tmp_path / "part.g2o").elements() == part["vertices"] + part["edges"]
+    await ops.plot_map(str(tmp_path / "part.png"), missions=["intel"])
+    assert (tmp_path / "part.png").stat().st_size > 0
+    assert await ops.load_progress(box) == {"loaded": 0, "of": 0}
+    again = await ops.load_bbox(box)
+    assert (again["loaded"], again["items"], again["bytes"]) == ([], 0, 0)
+
+    assert result.bbox is not None
+    everything = await ops.load_bbox(list(result.bbox.as_tuple()))
+    assert sorted(c["chunk"] for c in everything["loaded"]) == sorted(
+        c for t in outside for c in t.chunks()
+    )
     (info,) = await list_missions(b)
     assert (info.vertices, info.edges) == (1_728, 2_512)
-    assert await ops.load_progress([10, -20, -1, 11, -19, 1]) == {"loaded": 0, "of": 0}
-    again = await ops.load_bbox([10, -20, -1, 11, -19, 1])
-    assert again["loaded"] == []
 
 
 async def test_traffic_counts_what_the_transport_moved(make_peer: MakePeer) -> None:

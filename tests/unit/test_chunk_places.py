@@ -54,7 +54,7 @@ async def test_a_box_computed_off_the_loop_holds_what_was_applied_meanwhile(
 ) -> None:
     peer = await make_peer()
     imported = await import_graph(peer, read_g2o(SAMPLES / "pose_graphs" / "intel.g2o"))
-    chunk = imported.chunks[VERTICES]
+    chunk = imported.tiles[0].vertices
     places = peer.places
     places.forget(chunk)
     tx = peer.begin()

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from mapapi import Peer
+from mapapi.lookup.spatial import BBox
 from mapapi.maps import (
     EDGES,
     MISSIONS,
@@ -23,7 +24,7 @@ from mapapi.maps import (
     read_kimera,
 )
 from mapapi.maps.se3 import IDENTITY
-from mapapi.maps.stored import mission_chunks
+from mapapi.maps.stored import mission_parts
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
@@ -55,11 +56,18 @@ class TestImportGraph:
             2_512,
         )
         assert await counts(peer) == {MISSIONS: 1, VERTICES: 1_728, EDGES: 2_512}
+        # 1,728 vertices in 30 m: cut by count into tiles of at most TILE_VERTICES
+        assert len(result.tiles) == 4
         assert {t: len(peer.chunks(t)) for t in (MISSIONS, VERTICES, EDGES)} == {
             MISSIONS: 1,
-            VERTICES: 1,
-            EDGES: 1,
+            VERTICES: 4,
+            EDGES: 4,
         }
+        assert [t.vertex_count for t in result.tiles] == [432] * 4
+        assert sum(t.edge_count for t in result.tiles) == 2_512
+        held = {c.id: c.items for c in peer.chunks()}
+        for tile in result.tiles:
+            assert (held[tile.vertices], held[tile.edges]) == (tile.vertex_count, tile.edge_count)
         assert seen[-1] == (4_241, 4_241)
         assert result.bbox == graph.bbox()
 
@@ -84,21 +92,38 @@ class TestImportGraph:
 
         assert len(peer.log()) == 8 == len({r.commit for r in results})
         assert await counts(peer) == {MISSIONS: 8, VERTICES: 1_255, EDGES: 1_247 + 96 + 3_548}
-        assert len(peer.chunks(VERTICES)) == 8
+        # a robot's path of more than TILE_MIN_VERTICES poses wider than TILE_EXTENT is cut
+        assert len(peer.chunks(VERTICES)) == 15 == sum(len(r.tiles) for r in results)
         tx = peer.begin()
         kinds = [e.kind for e in (await tx.items(EDGES)).values()]
         assert kinds.count(EdgeKind.INTER_ROBOT.value) == 3_548
 
-    async def test_the_mission_row_names_the_missions_chunks(self) -> None:
+    async def test_the_mission_row_names_the_missions_chunks_and_tiles(self) -> None:
         peer = Peer.in_memory()
         intel = await import_graph(peer, read_g2o(INTEL))
         tunnels = await import_graphs(peer, read_kimera(SAMPLES / "kimera_multi_tunnels_8robots"))
 
-        named = await mission_chunks(peer, ["intel", "robot3", "nope"])
+        named = await mission_parts(peer, ["intel", "robot3", "nope"])
 
-        assert named == {"intel": intel.chunks, "robot3": tunnels[3].chunks}
-        assert sorted(named["intel"]) == [EDGES, MISSIONS, VERTICES]
-        assert await mission_chunks(peer, []) == {}
+        assert set(named) == {"intel", "robot3"}
+        assert named["intel"].chunks == intel.chunks == {MISSIONS: intel.chunks[MISSIONS]}
+        assert named["intel"].tiles == intel.tiles
+        assert named["robot3"].tiles == tunnels[3].tiles
+        every = {c.id for c in peer.chunks()}
+        assert set(intel.all_chunks()) | set(tunnels[3].all_chunks()) <= every
+        assert await mission_parts(peer, []) == {}
+
+    async def test_a_box_needs_the_mission_row_and_the_tiles_it_overlaps(self) -> None:
+        peer = Peer.in_memory()
+        intel = await import_graph(peer, read_g2o(INTEL))
+        first, *others = intel.tiles
+        (parts,) = (await mission_parts(peer, ["intel"])).values()
+
+        assert parts.in_box(first.bbox) >= {intel.chunks[MISSIONS], *first.chunks()}
+        inside = BBox(*first.bbox.mins, *first.bbox.mins)  # a corner of the first tile only
+        assert not any(t.bbox.overlaps(inside) for t in others)
+        assert parts.in_box(inside) == {intel.chunks[MISSIONS], *first.chunks()}
+        assert parts.in_box(intel.bbox) == set(intel.all_chunks())
 
     async def test_renaming_moves_the_missions_own_edge_ends(self) -> None:
         peer = Peer.in_memory()
@@ -121,7 +146,7 @@ class TestNothingHalfImported:
 
     async def test_a_failure_while_staging_leaves_no_rows_and_no_chunks(self) -> None:
         peer = Peer.in_memory()
-        await import_graph(peer, read_g2o(INTEL, mission="first"))
+        first = await import_graph(peer, read_g2o(INTEL, mission="first"))
 
         def explode(done: int, total: int) -> None:
             raise RuntimeError("stopped after staging, before the commit")
@@ -129,17 +154,17 @@ class TestNothingHalfImported:
         with pytest.raises(RuntimeError, match="stopped"):
             await import_graph(peer, read_g2o(INTEL, mission="second"), progress=explode)
         assert len(peer.log()) == 1
-        assert len(peer.chunks()) == 3
+        assert sorted(c.id for c in peer.chunks()) == sorted(first.all_chunks())
         assert await counts(peer) == {MISSIONS: 1, VERTICES: 1_728, EDGES: 2_512}
 
     async def test_a_mission_cannot_be_imported_twice(self) -> None:
         peer = Peer.in_memory()
         graph = read_g2o(INTEL)
-        await import_graph(peer, graph)
+        first = await import_graph(peer, graph)
         with pytest.raises(MapImportError, match="exists already"):
             await import_graph(peer, graph)
         assert len(peer.log()) == 1
-        assert len(peer.chunks()) == 3
+        assert sorted(c.id for c in peer.chunks()) == sorted(first.all_chunks())
 
     async def test_a_table_of_another_type_is_refused(self) -> None:
         peer = Peer.in_memory()

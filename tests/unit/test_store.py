@@ -138,17 +138,17 @@ class TestTablesAndChunks:
         writer.store.add_chunk(writer.c1, "t")
         assert len(writer.store.chunks("t")) == 2
 
-    def test_chunks_count_live_items_now(self, writer: Writer) -> None:
+    def test_chunks_count_live_items_and_their_bytes_now(self, writer: Writer) -> None:
         a, b, c, d = (ItemId.new() for _ in range(4))
         writer.commit(1, (a, writer.c1, b"a"), (b, writer.c1, b"b"), (c, writer.c2, b"c"))
-        writer.commit(2, (b, writer.c1, None), (a, writer.c1, b"a2"), (d, writer.cu, b"d"))
+        writer.commit(2, (b, writer.c1, None), (a, writer.c1, b"a22"), (d, writer.cu, b"dd"))
         counts = {info.id: info for info in writer.store.chunks()}
         assert counts == {
-            writer.c1: ChunkInfo(writer.c1, "t", 1),
-            writer.c2: ChunkInfo(writer.c2, "t", 1),
-            writer.cu: ChunkInfo(writer.cu, "u", 1),
+            writer.c1: ChunkInfo(writer.c1, "t", 1, 3),  # a's newest revision only
+            writer.c2: ChunkInfo(writer.c2, "t", 1, 1),
+            writer.cu: ChunkInfo(writer.cu, "u", 1, 2),
         }
-        assert writer.store.chunks(only=writer.c2) == [ChunkInfo(writer.c2, "t", 1)]
+        assert writer.store.chunks(only=writer.c2) == [ChunkInfo(writer.c2, "t", 1, 1)]
         assert writer.store.chunks("u", only=writer.c2) == []
         assert writer.store.chunks(only=ChunkId.new()) == []
 

@@ -52,7 +52,7 @@ class Pose3(_message.Message):
     def __init__(self, x: _Optional[float] = ..., y: _Optional[float] = ..., z: _Optional[float] = ..., qx: _Optional[float] = ..., qy: _Optional[float] = ..., qz: _Optional[float] = ..., qw: _Optional[float] = ...) -> None: ...
 
 class Mission(_message.Message):
-    __slots__ = ("name", "robot", "frame", "bbox", "chunks")
+    __slots__ = ("name", "robot", "frame", "bbox", "chunks", "tiles")
     class ChunksEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -65,12 +65,28 @@ class Mission(_message.Message):
     FRAME_FIELD_NUMBER: _ClassVar[int]
     BBOX_FIELD_NUMBER: _ClassVar[int]
     CHUNKS_FIELD_NUMBER: _ClassVar[int]
+    TILES_FIELD_NUMBER: _ClassVar[int]
     name: str
     robot: str
     frame: str
     bbox: Box3
     chunks: _containers.ScalarMap[str, str]
-    def __init__(self, name: _Optional[str] = ..., robot: _Optional[str] = ..., frame: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., chunks: _Optional[_Mapping[str, str]] = ...) -> None: ...
+    tiles: _containers.RepeatedCompositeFieldContainer[Tile]
+    def __init__(self, name: _Optional[str] = ..., robot: _Optional[str] = ..., frame: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., chunks: _Optional[_Mapping[str, str]] = ..., tiles: _Optional[_Iterable[_Union[Tile, _Mapping]]] = ...) -> None: ...
+
+class Tile(_message.Message):
+    __slots__ = ("bbox", "vertices", "edges", "vertex_count", "edge_count")
+    BBOX_FIELD_NUMBER: _ClassVar[int]
+    VERTICES_FIELD_NUMBER: _ClassVar[int]
+    EDGES_FIELD_NUMBER: _ClassVar[int]
+    VERTEX_COUNT_FIELD_NUMBER: _ClassVar[int]
+    EDGE_COUNT_FIELD_NUMBER: _ClassVar[int]
+    bbox: Box3
+    vertices: str
+    edges: str
+    vertex_count: int
+    edge_count: int
+    def __init__(self, bbox: _Optional[_Union[Box3, _Mapping]] = ..., vertices: _Optional[str] = ..., edges: _Optional[str] = ..., vertex_count: _Optional[int] = ..., edge_count: _Optional[int] = ...) -> None: ...
 
 class VertexRef(_message.Message):
     __slots__ = ("mission", "index")

@@ -1,0 +1,114 @@
+"""What `mapctl bench spatial` registers of each mission: its row's box, and the
+spatial tiles an import would cut it into (`mapapi.maps.tiles`), each with the
+rows and bytes a `query-bbox --load` of it moves: its vertices and its edges,
+encoded as an import encodes them (`mapapi.maps.importer.build_rows`)."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping, Set
+from dataclasses import dataclass
+
+from mapapi.core.ids import ChunkId
+from mapapi.lookup.spatial import BBox
+from mapapi.maps.graph import MissionGraph
+from mapapi.maps.importer import build_rows
+from mapapi.maps.schema import EDGES, MISSIONS, VERTICES
+from mapapi.maps.tiles import tile_graph
+
+
+@dataclass(frozen=True)
+class TilePart:
+    """One tile of a mission: its box, and the rows (vertices and edges) and
+    payload bytes loading it moves."""
+
+    mission: str
+    number: int
+    bbox: BBox
+    rows: int
+    bytes: int
+
+    @property
+    def chunk(self) -> ChunkId:
+        """The id it is registered under."""
+        return stable_chunk(f"{self.mission}#{self.number}")
+
+
+def stable_chunk(name: str) -> ChunkId:
+    """A stable id: the same mission or tile is the same chunk in every grid and run."""
+    return ChunkId(hashlib.md5(name.encode(), usedforsecurity=False).hexdigest())
+
+
+@dataclass(frozen=True)
+class MissionPart:
+    """One mission: its box, its row's bytes, and its tiles."""
+
+    name: str
+    bbox: BBox
+    row_bytes: int
+    tiles: tuple[TilePart, ...]
+
+    @property
+    def chunk(self) -> ChunkId:
+        """The id its row is registered under."""
+        return stable_chunk(self.name)
+
+    @property
+    def rows(self) -> int:
+        """Every row of the mission: its own and its tiles'."""
+        return 1 + sum(t.rows for t in self.tiles)
+
+    @property
+    def bytes(self) -> int:
+        """The payload bytes of every row of the mission."""
+        return self.row_bytes + sum(t.bytes for t in self.tiles)
+
+
+def mission_part(graph: MissionGraph) -> MissionPart | None:
+    """`graph` as the bench registers it (None: it has no vertices)."""
+    box = graph.bbox()
+    if box is None:
+        return None
+    rows = build_rows(graph)
+    vertex_bytes = [m.ByteSize() for m in rows[VERTICES]]  # in `graph.vertices` order
+    at = {index: n for n, index in enumerate(graph.vertices)}
+    edge_bytes = [m.ByteSize() for m in rows[EDGES]]
+    tiles = tuple(
+        TilePart(
+            graph.name,
+            number,
+            tile.bbox,
+            len(tile.vertices) + len(tile.edges),
+            sum(vertex_bytes[at[i]] for i in tile.vertices)
+            + sum(edge_bytes[n] for n in tile.edges),
+        )
+        for number, tile in enumerate(tile_graph(graph))
+    )
+    return MissionPart(graph.name, box, rows[MISSIONS][0].ByteSize(), tiles)
+
+
+@dataclass(frozen=True)
+class Moved:
+    """What a `query-bbox --load` of one query's findings moves: the rows of the
+    missions found and of the tiles found, against the whole missions found."""
+
+    missions: set[str]
+    tiles: int
+    rows: int
+    bytes: int
+    rows_whole: int
+    bytes_whole: int
+
+    @classmethod
+    def of(cls, parts: Mapping[str, MissionPart], found: Set[ChunkId]) -> Moved:
+        """What loading the chunks `found` (rows and tiles) of `parts` moves."""
+        whole = [part for part in parts.values() if part.chunk in found]
+        hit = [tile for part in parts.values() for tile in part.tiles if tile.chunk in found]
+        return cls(
+            {part.name for part in whole},
+            len(hit),
+            len(whole) + sum(t.rows for t in hit),
+            sum(p.row_bytes for p in whole) + sum(t.bytes for t in hit),
+            sum(p.rows for p in whole),
+            sum(p.bytes for p in whole),
+        )
