@@ -24,6 +24,7 @@ from mapapi.maps.rules import map_rules
 from mapapi.service import daemon, daemon_process
 from mapapi.service.control import RemoteOperations
 from mapapi.service.fsck import FsckOperations
+from mapapi.service.gc import GcOperations
 from mapapi.service.ops import DaemonOperations, Operations, RepoOperations
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
@@ -72,6 +73,7 @@ def operations(
             MapOperations(peer),
             DaemonOperations(on_shutdown),
             FsckOperations(peer),
+            GcOperations(peer),
         ),
     )
 

@@ -41,7 +41,7 @@ import random
 import statistics
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -50,10 +50,10 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.dht.chord import ChordNode
 from mapapi.lookup.spatial import BBox, SpatialGrid
 from mapapi.lookup.spatial_index import QueryStats, SpatialIndex, SpatialRef
-from mapapi.maps import MissionGraph, read_g2o, read_kimera
+from mapapi.maps import read_g2o, read_kimera
 from mapapi.net import LinkShape, Shaper
 from mapbench.ring import still_ring
-from mapbench.spatial_tiles import MissionPart, Moved, TilePart, mission_part
+from mapbench.spatial_tiles import MissionPart, Moved, TilePart, mission_part, segments
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +82,7 @@ SEGMENT = 100
 """Parking-garage vertices per mission: its 1,661 poses give 17 missions."""
 
 _MARGIN = 0.02  # of each side, so no mission lies on the bounds' faces
+_MIN_PAD = 0.5  # metres: the least margin, for an axis the data does not spread on
 _TTL = 24 * 3600.0  # seconds; no entry may expire during a run
 _INDEX = "bench"
 
@@ -125,30 +126,6 @@ class Dataset:
         return sides.index(min(sides))
 
 
-def segments(graph: MissionGraph, size: int) -> list[MissionGraph]:
-    """`graph`'s vertices, in index order, cut into missions of `size` vertices
-    (the last may be shorter), named ``{graph.name}-{k:02d}``, each with the
-    edges among its own vertices (edges between segments are dropped).
-
-    Raises:
-        ValueError: `size` is below 1.
-    """
-    if size < 1:
-        raise ValueError(f"a segment holds at least 1 vertex, got {size}")
-    order = sorted(graph.vertices)
-    cut = []
-    for k, start in enumerate(range(0, len(order), size)):
-        name = f"{graph.name}-{k:02d}"
-        vertices = {i: graph.vertices[i] for i in order[start : start + size]}
-        edges = [
-            replace(e, source=(name, e.source[1]), target=(name, e.target[1]))
-            for e in graph.edges
-            if e.source[1] in vertices and e.target[1] in vertices
-        ]
-        cut.append(MissionGraph(name, graph.robot, graph.frame, vertices, edges))
-    return cut
-
-
 def load_dataset(name: str, samples: Path = SAMPLES) -> Dataset:
     """The missions of data set `name` (read from the `samples` folder), or of
     the g2o file at path `name`.
@@ -184,7 +161,10 @@ def grid_for(dataset: Dataset, cells: int) -> SpatialGrid:
     if side < 1 or side * side != cells:
         raise UsageError(f"{cells} cells are not n x n; use a square number such as 64")
     extent = dataset.extent
-    pad = [_MARGIN * (hi - lo) for lo, hi in zip(extent.mins, extent.maxs, strict=True)]
+    # a flat map (a 2D graph: z = 0) still needs a positive extent on its vertical axis
+    pad = [
+        max(_MARGIN * (hi - lo), _MIN_PAD) for lo, hi in zip(extent.mins, extent.maxs, strict=True)
+    ]
     lows = [lo - p for lo, p in zip(extent.mins, pad, strict=True)]
     highs = [hi + p for hi, p in zip(extent.maxs, pad, strict=True)]
     counts = [side, side, side]
@@ -376,6 +356,8 @@ async def _row(
         "bytes_moved": _mean(m.bytes for m in moved),
         "rows_whole": _mean(m.rows_whole for m in moved),
         "bytes_whole": _mean(m.bytes_whole for m in moved),
+        "share_moved": _mean(m.share for m in moved),
+        "share_moved_max": max(m.share for m in moved),
         "mismatches": mismatches,
     }
 

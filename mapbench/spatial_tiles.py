@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping, Set
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from mapapi.core.ids import ChunkId
 from mapapi.lookup.spatial import BBox
@@ -112,3 +112,32 @@ class Moved:
             sum(p.rows for p in whole),
             sum(p.bytes for p in whole),
         )
+
+    @property
+    def share(self) -> float:
+        """The rows moved as a share of the whole missions' (0 when none was found)."""
+        return round(self.rows / self.rows_whole, 4) if self.rows_whole else 0.0
+
+
+def segments(graph: MissionGraph, size: int) -> list[MissionGraph]:
+    """`graph`'s vertices, in index order, cut into missions of `size` vertices
+    (the last may be shorter), named ``{graph.name}-{k:02d}``, each with the
+    edges among its own vertices (edges between segments are dropped).
+
+    Raises:
+        ValueError: `size` is below 1.
+    """
+    if size < 1:
+        raise ValueError(f"a segment holds at least 1 vertex, got {size}")
+    order = sorted(graph.vertices)
+    cut = []
+    for k, start in enumerate(range(0, len(order), size)):
+        name = f"{graph.name}-{k:02d}"
+        vertices = {i: graph.vertices[i] for i in order[start : start + size]}
+        edges = [
+            replace(e, source=(name, e.source[1]), target=(name, e.target[1]))
+            for e in graph.edges
+            if e.source[1] in vertices and e.target[1] in vertices
+        ]
+        cut.append(MissionGraph(name, graph.robot, graph.frame, vertices, edges))
+    return cut

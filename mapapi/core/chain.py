@@ -45,11 +45,14 @@ def link(
 
 
 def replay(
-    chunk: ChunkId, commits: Iterable[tuple[CommitRecord, Sequence[Revision]]]
+    chunk: ChunkId,
+    commits: Iterable[tuple[CommitRecord, Sequence[Revision]]],
+    start: bytes = GENESIS,
 ) -> list[bytes]:
-    """Every link of a chunk's chain, from its commits in log (time) order."""
+    """Every link of a chunk's chain, from its commits in log (time) order, after
+    the link `start` (the chain's beginning by default)."""
     links: list[bytes] = []
-    previous = GENESIS
+    previous = start
     for record, revisions in commits:
         previous = link(previous, chunk, record, revisions)
         links.append(previous)
@@ -75,10 +78,18 @@ def extend(
 
 
 def rebuild(
-    chunk: ChunkId, records: Mapping[CommitId, CommitRecord], revisions: Iterable[Revision]
+    chunk: ChunkId,
+    records: Mapping[CommitId, CommitRecord],
+    revisions: Iterable[Revision],
+    base: Sequence[tuple[CommitId, bytes]] = (),
 ) -> list[tuple[CommitId, bytes]]:
     """A chunk's whole chain from its stored history: (commit, link) of every
     commit that wrote to it, in commit order (time, then id).
+
+    `base` is the chain's compacted part (`mapctl gc`): the links of the commits
+    some of whose revisions were dropped, which the history can no longer give.
+    They are kept as they are, and the chain goes on from the last of them over
+    the commits after it, which the history holds whole.
 
     Commit times grow strictly along a chunk's history on every commit path (a
     writer stamps past every holder's clock, a chunk's log past the chunk's
@@ -88,13 +99,15 @@ def rebuild(
     Raises:
         KeyError: a revision's commit is not in `records`.
     """
+    compacted = {commit for commit, _ in base}
     by_commit: dict[CommitId, list[Revision]] = {}
     for revision in revisions:
-        if revision.chunk_id == chunk:
+        if revision.chunk_id == chunk and revision.commit_id not in compacted:
             by_commit.setdefault(revision.commit_id, []).append(revision)
     ordered = sorted(by_commit, key=lambda c: (records[c].time, c))
-    links = replay(chunk, [(records[c], by_commit[c]) for c in ordered])
-    return list(zip(ordered, links, strict=True))
+    start = base[-1][1] if base else GENESIS
+    links = replay(chunk, [(records[c], by_commit[c]) for c in ordered], start)
+    return [*base, *zip(ordered, links, strict=True)]
 
 
 def _text(h: hashlib._Hash, text: str) -> None:

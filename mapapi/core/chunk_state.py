@@ -24,8 +24,9 @@ class TxState:
 
 @dataclass(frozen=True, slots=True)
 class ChunkState:
-    """A chunk's table, clock, whole history, transaction records and replication
-    factor (0: the swarm's default)."""
+    """A chunk's table, clock, whole history (since its last `gc`), transaction
+    records, replication factor (0: the swarm's default) and the compacted part
+    of its hash chain."""
 
     table: str
     type_name: str
@@ -34,3 +35,4 @@ class ChunkState:
     commits: tuple[CommitRecord, ...]
     txs: tuple[TxState, ...] = ()
     replication: int = 0
+    compacted: tuple[tuple[CommitId, bytes], ...] = ()  # the chain's part `gc` left bare

@@ -272,6 +272,8 @@ def encode_chunk_state(
     m = core_pb2.ChunkSnapshot()
     for tx in state.txs:
         m.txs.add(commit_id=tx.commit_id.to_bytes(), state=tx.state, time=tx.time, data=tx.data)
+    for commit, link in state.compacted:
+        m.compacted.add(commit_id=commit.to_bytes(), link=link)
     out.append(m.SerializeToString())
     return b"".join(out)
 
@@ -296,6 +298,7 @@ def decode_chunk_state(data: bytes) -> ChunkState:
                 TxState(CommitId.from_bytes(t.commit_id), t.state, t.time, t.data) for t in m.txs
             ),
             m.replication,
+            tuple((CommitId.from_bytes(c.commit_id), c.link) for c in m.compacted),
         )
     except (DecodeError, ValueError) as exc:
         raise CorruptRepoError(f"a chunk's snapshot does not parse: {exc}") from exc

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, ParamSpec, TypeVar
+from weakref import WeakSet
 
 from mapapi.core.clock import LamportClock
 from mapapi.core.errors import ChunkNotFound, NotParticipatingError, UsageError
@@ -83,6 +84,7 @@ class Peer:
         self.grid = grid or SpatialGrid()
         self.places = ChunkPlaces(store)
         self.triggers = Triggers()
+        self.readers: WeakSet[Transaction] = WeakSet()  # begun here: `gc` keeps what they read
         self.clock = LamportClock(store.clock())
         self.swarm: Swarm | None = None
         self._tables = Tables(store)
@@ -360,13 +362,17 @@ class Peer:
         if stale:
             if at is not None:
                 raise UsageError("a stale view reads the replicas as they are now: no --at")
-            return Transaction(StaleReads(self), self.store.clock(), self.id, isolation=isolation)
-        now = self.now()
-        if at is not None and not 0 <= at <= now:
-            raise UsageError(f"time {at} is outside 0..{now} (the newest commit time)")
-        if at is not None:
-            return Transaction(self, at, self.id, isolation=isolation)
-        return Transaction(self, now, self.id, isolation=isolation, fresh=True)
+            tx = Transaction(StaleReads(self), self.store.clock(), self.id, isolation=isolation)
+        else:
+            now = self.now()
+            if at is not None and not 0 <= at <= now:
+                raise UsageError(f"time {at} is outside 0..{now} (the newest commit time)")
+            if at is not None and at < (floor := self.store.history_floor()):
+                raise UsageError(f"time {at} is before {floor}: `mapctl gc` dropped that history")
+            begin = now if at is None else at
+            tx = Transaction(self, begin, self.id, isolation=isolation, fresh=at is None)
+        self.readers.add(tx)
+        return tx
 
     def read_local(self, item_id: ItemId, time: int) -> Revision | None:
         """The newest local revision of an item at or before `time`."""

@@ -39,6 +39,7 @@ class RepoConfig:
     peer_id: PeerId
     spatial: SpatialGrid = field(default_factory=SpatialGrid)
     secure: bool = False
+    retention: int | None = None  # [history] retention: `gc` keeps each item's newest N
 
     def to_toml(self) -> str:
         """The config as TOML text (strings quoted as JSON, valid TOML; floats
@@ -47,11 +48,15 @@ class RepoConfig:
         bounds = ", ".join(repr(float(v)) for v in grid["bounds"])
         cells = ", ".join(str(int(n)) for n in grid["cells"])
         return (
-            f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n\n"
-            f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
-            f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
-            f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
-        ) + (_SECURE_TOML if self.secure else "")
+            (
+                f"name = {_toml_str(self.name)}\npeer_id = {_toml_str(str(self.peer_id))}\n\n"
+                f"# The spatial index: fixed bounds (xmin, ymin, zmin, xmax, ymax, zmax, metres)\n"
+                f"# split into cells (nx, ny, nz). Every peer of a swarm must use the same.\n"
+                f"[spatial]\nbounds = [{bounds}]\ncells = [{cells}]\n"
+            )
+            + (_SECURE_TOML if self.secure else "")
+            + _history_toml(self.retention)
+        )
 
     @classmethod
     def from_toml(cls, text: str, source: Path) -> RepoConfig:
@@ -61,8 +66,9 @@ class RepoConfig:
             data: dict[str, Any] = tomllib.loads(text)
             spatial = data.get("spatial", {})
             security = data.get("security", {})
-            if not isinstance(spatial, dict) or not isinstance(security, dict):
-                raise ValueError("[spatial] and [security] must be tables")
+            history = data.get("history", {})
+            if not all(isinstance(t, dict) for t in (spatial, security, history)):
+                raise ValueError("[spatial], [security] and [history] must be tables")
             secure = security.get("secure", False)
             if not isinstance(secure, bool):
                 raise ValueError("[security] secure must be true or false")
@@ -71,6 +77,25 @@ class RepoConfig:
                 peer_id=PeerId(data["peer_id"]),
                 spatial=SpatialGrid.from_config(spatial),
                 secure=secure,
+                retention=_retention(history.get("retention")),
             )
         except (tomllib.TOMLDecodeError, KeyError, ValueError, MapError) as exc:
             raise CorruptRepoError(f"{source} is damaged: {exc}; {FIX_CONFIG}") from exc
+
+
+def _history_toml(retention: int | None) -> str:
+    if retention is None:
+        return ""
+    note = f"# `mapctl gc` keeps each item's newest {retention} revisions."
+    return f"\n{note}\n[history]\nretention = {retention}\n"
+
+
+def _retention(value: object) -> int | None:
+    """`[history] retention`: how many revisions of each item `gc` keeps (None: unset)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(
+            f"[history] retention must be a whole number of revisions >= 1, not {value!r}"
+        )
+    return value

@@ -185,6 +185,10 @@ class Store(Protocol):
         """Ids of `kind` starting with `prefix` (at most 2: enough to see ambiguity)."""
 
     # persisted CLI views
+    def history_floor(self) -> int:
+        """The earliest time every revision is still stored for: `mapctl gc`
+        dropped revisions only earlier reads see (0: the history is whole)."""
+
     def load_view(self, name: str) -> bytes | None:
         """The serialized view `name`, or None."""
 
@@ -230,8 +234,10 @@ class ReplicaStore(Store, Protocol):
         revisions: Sequence[Revision],
         commits: Sequence[CommitRecord],
         holders: Sequence[PeerId],
+        base: Sequence[tuple[CommitId, bytes]] = (),
     ) -> None:
-        """Take in a replica received from a holder, atomically."""
+        """Take in a replica received from a holder, atomically; `base` is the
+        holder's compacted chain (`chain_base`)."""
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:
         """Forget a chunk's replica (commit records stay)."""
@@ -286,6 +292,10 @@ class ReplicaStore(Store, Protocol):
 
     def chain_at(self, chunk_id: ChunkId, seq: int) -> bytes | None:
         """The link of the chunk's `seq`-th commit (from 1), or None if it has fewer."""
+
+    def chain_base(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """The chain's compacted links (`mapctl gc`), oldest first; empty when
+        the chunk's history is whole."""
 
     def chain_length(self, chunk_id: ChunkId) -> int:
         """How many commits the chunk's chain links."""

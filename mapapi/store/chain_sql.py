@@ -30,8 +30,10 @@ CREATE TABLE IF NOT EXISTS chain_diverged (
     chunk_id TEXT NOT NULL, peer_id TEXT NOT NULL, position INTEGER NOT NULL,
     detail TEXT NOT NULL, noticed REAL NOT NULL,
     PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
+CREATE TABLE IF NOT EXISTS chain_compacted (
+    chunk_id TEXT PRIMARY KEY, seq INTEGER NOT NULL) WITHOUT ROWID;
 """
-CHAIN_TABLES = ("chain_diverged",)
+CHAIN_TABLES = ("chain_diverged", "chain_compacted")
 """The tables above; an older store gains the ones it lacks."""
 
 LINKED = "chains"
@@ -80,21 +82,53 @@ def extend(
 
 
 def rebuild(con: sqlite3.Connection, path: Path, chunk: ChunkId) -> None:
-    """Make the chunk's chain anew from its stored history (`chain.rebuild`)."""
+    """Make the chunk's chain anew from its stored history (`chain.rebuild`), after
+    its compacted part."""
     records = {c.id: c for c in sqlite_replica.chunk_commits(path, con, chunk)}
-    replace(
-        con, chunk, chain.rebuild(chunk, records, sqlite_replica.chunk_revisions(path, con, chunk))
-    )
+    revisions = sqlite_replica.chunk_revisions(path, con, chunk)
+    kept = base(con, chunk)
+    replace(con, chunk, chain.rebuild(chunk, records, revisions, kept), len(kept))
 
 
-def replace(con: sqlite3.Connection, chunk: ChunkId, links: list[tuple[CommitId, bytes]]) -> None:
+def replace(
+    con: sqlite3.Connection,
+    chunk: ChunkId,
+    links: list[tuple[CommitId, bytes]],
+    compacted: int = 0,
+) -> None:
     """Make `links` the chunk's whole chain (rebuilt by the caller, say before a
-    write transaction, from the history it installs)."""
+    write transaction, from the history it installs), its first `compacted`
+    links those of commits whose history is gone in part (`compacted`)."""
     con.execute("DELETE FROM raft_chain WHERE chunk_id = ?", (chunk,))
     con.executemany(
         "INSERT INTO raft_chain (chunk_id, seq, commit_id, link) VALUES (?, ?, ?, ?)",
         [(chunk, seq, commit, link) for seq, (commit, link) in enumerate(links, 1)],
     )
+    set_compacted(con, chunk, compacted)
+
+
+def compacted(con: sqlite3.Connection, chunk: str) -> int:
+    """How many of the chunk's first links stand for commits some of whose
+    revisions `mapctl gc` dropped (0: its history is whole)."""
+    row = con.execute("SELECT seq FROM chain_compacted WHERE chunk_id = ?", (chunk,)).fetchone()
+    return 0 if row is None else int(row[0])
+
+
+def set_compacted(con: sqlite3.Connection, chunk: str, seq: int) -> None:
+    """Record that the chunk's first `seq` links are its compacted part."""
+    if seq:
+        con.execute("INSERT OR REPLACE INTO chain_compacted VALUES (?, ?)", (chunk, seq))
+    else:
+        con.execute("DELETE FROM chain_compacted WHERE chunk_id = ?", (chunk,))
+
+
+def base(con: sqlite3.Connection, chunk: str) -> list[tuple[CommitId, bytes]]:
+    """The chunk's compacted links, oldest first (empty: its history is whole)."""
+    rows = con.execute(
+        "SELECT commit_id, link FROM raft_chain WHERE chunk_id = ? AND seq <= ? ORDER BY seq",
+        (chunk, compacted(con, chunk)),
+    )
+    return [(CommitId(c), bytes(link)) for c, link in rows]
 
 
 def link_all(con: sqlite3.Connection, path: Path) -> None:

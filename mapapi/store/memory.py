@@ -12,15 +12,7 @@ from mapapi.core import chain, codec
 from mapapi.core.errors import ChunkNotFound, UsageError
 from mapapi.core.history import CommitRecord, ItemHistory, Revision, revision_at
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
-from mapapi.store.base import (
-    ChunkInfo,
-    Divergence,
-    IdKind,
-    LogRow,
-    RaftRecord,
-    TxRow,
-    newest_first,
-)
+from mapapi.store.base import ChunkInfo, Divergence, IdKind, LogRow, RaftRecord, TxRow, newest_first
 from mapapi.store.memory_chain import MemoryChains
 
 
@@ -40,6 +32,7 @@ class MemoryStore(MemoryChains):
         self._raft: dict[ChunkId, RaftRecord] = {}
         self._tx: dict[tuple[ChunkId, CommitId], TxRow] = {}
         self._chains: dict[ChunkId, list[tuple[CommitId, bytes]]] = {}
+        self._compacted: dict[ChunkId, int] = {}  # of each chain, the links `gc` left bare
         self._diverged: dict[tuple[ChunkId, PeerId], Divergence] = {}
 
     def close(self) -> None:
@@ -262,6 +255,7 @@ class MemoryStore(MemoryChains):
         revisions: Sequence[Revision],
         commits: Sequence[CommitRecord],
         holders: Sequence[PeerId],
+        base: Sequence[tuple[CommitId, bytes]] = (),
     ) -> None:
         """Take in a replica received from a holder, replacing what this store had
         of the chunk (as `SqliteStore.install_chunk`)."""
@@ -280,7 +274,8 @@ class MemoryStore(MemoryChains):
             for revision in revisions:
                 self._write(records[revision.commit_id], [revision])
             self.set_holders(chunk_id, holders)
-            self._chains[chunk_id] = chain.rebuild(chunk_id, records, revisions)
+            self._chains[chunk_id] = chain.rebuild(chunk_id, records, revisions, base)
+            self._compacted[chunk_id] = len(base)
             self._diverged = {k: v for k, v in self._diverged.items() if k[0] != chunk_id}
 
     def drop_chunk(self, chunk_id: ChunkId) -> None:

@@ -17,6 +17,7 @@ class MemoryChains:
 
     _lock: threading.RLock
     _chains: dict[ChunkId, list[tuple[CommitId, bytes]]]
+    _compacted: dict[ChunkId, int]
     _diverged: dict[tuple[ChunkId, PeerId], Divergence]
 
     def chain_link(self, chunk_id: ChunkId, commit_id: CommitId, link: bytes) -> None:
@@ -48,6 +49,16 @@ class MemoryChains:
         """How many commits the chunk's chain links."""
         with self._lock:
             return len(self._chains.get(chunk_id, []))
+
+    def chain_base(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """The chain's compacted links (a replica installed from a holder that ran
+        `gc`; a store in memory never runs it itself)."""
+        with self._lock:
+            return self._chains.get(chunk_id, [])[: self._compacted.get(chunk_id, 0)]
+
+    def history_floor(self) -> int:
+        """0: a store in memory never drops history."""
+        return 0
 
     def diverged(self, found: Divergence) -> None:
         """Record that a holder's chain of a chunk differs from this replica's."""

@@ -305,17 +305,19 @@ class SqliteStore(SqliteChains, SqliteViews):
         revisions: Sequence[Revision],
         commits: Sequence[CommitRecord],
         holders: Sequence[PeerId],
+        base: Sequence[tuple[CommitId, bytes]] = (),
     ) -> None:
         """Take in a replica received from a holder, atomically (all or nothing).
 
         It replaces what this store had of the chunk: a revision the holder lacks
         goes, and so does the record of a commit left with no revision at all.
+        `base` is the holder's compacted chain (`chain_base`).
 
         Raises:
             UsageError: this repository has a table of that name with another type.
         """
         try:  # hashed before the write lock is taken: installs hold it long enough
-            links = chain.rebuild(chunk_id, {c.id: c for c in commits}, revisions)
+            links = chain.rebuild(chunk_id, {c.id: c for c in commits}, revisions, base)
         except KeyError:  # a revision of a commit recorded only here: from the store
             links = None
         con = self._con()
@@ -323,9 +325,10 @@ class SqliteStore(SqliteChains, SqliteViews):
             self.mark.before_write(con)
             sqlite_replica.install(con, chunk_id, table, type_name, revisions, commits, holders)
             if links is None:
+                chain_sql.replace(con, chunk_id, list(base), len(base))
                 chain_sql.rebuild(con, self.path, chunk_id)
             else:
-                chain_sql.replace(con, chunk_id, links)
+                chain_sql.replace(con, chunk_id, links, len(base))
             chain_sql.forget(con, chunk_id)
             if commits:
                 newest = max(commits, key=lambda c: (c.time, c.id))

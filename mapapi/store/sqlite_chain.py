@@ -14,7 +14,7 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 
 from mapapi.core.ids import ChunkId, CommitId, PeerId
-from mapapi.store import chain_sql, raft_sql
+from mapapi.store import chain_sql, compact_sql, raft_sql
 from mapapi.store.base import Divergence, Rollback
 from mapapi.store.mark import HighWater
 
@@ -49,6 +49,23 @@ class SqliteChains:
     def chain_length(self, chunk_id: ChunkId) -> int:
         """How many commits the chunk's chain links."""
         return raft_sql.length(self._con(), chunk_id)
+
+    def chain_base(self, chunk_id: ChunkId) -> list[tuple[CommitId, bytes]]:
+        """The chain's compacted links, oldest first: those of commits some of whose
+        revisions `mapctl gc` dropped, which the history can no longer rebuild."""
+        return chain_sql.base(self._con(), chunk_id)
+
+    def compact_history(self, horizon: int, keep: int | None = None) -> compact_sql.Compaction:
+        """Drop the revisions no read at or after `horizon` sees, beyond each item's
+        `keep` newest (`compact_sql`); the caller picks a horizon no reader began
+        before. The file keeps its size: SQLite reuses the freed pages."""
+        con = self._con()
+        with self._write(con):
+            return compact_sql.compact(con, horizon, keep)
+
+    def history_floor(self) -> int:
+        """The earliest time every revision is still here for (`compact_history`)."""
+        return compact_sql.floor(self._con())
 
     def diverged(self, found: Divergence) -> None:
         """Record that a holder's chain of a chunk differs from this replica's."""

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from mapapi.core.history import CommitRecord, Revision
-from mapapi.core.ids import ChunkId, PeerId
+from mapapi.core.ids import ChunkId, CommitId, PeerId
 from mapapi.store import sqlite_labels
 from mapapi.store.labels import Labels, LabelSummary
 from mapapi.store.sqlite import SqliteStore
@@ -71,12 +71,13 @@ class LabelledSqliteStore(SqliteStore):
         revisions: Sequence[Revision],
         commits: Sequence[CommitRecord],
         holders: Sequence[PeerId],
+        base: Sequence[tuple[CommitId, bytes]] = (),
     ) -> None:
         """Take in a replica, and index it in place of what the index had of it."""
         con = self._con()
         with self._write(con):
             was_complete = sqlite_labels.complete(con, self.labels)
-            super().install_chunk(chunk_id, table, type_name, revisions, commits, holders)
+            super().install_chunk(chunk_id, table, type_name, revisions, commits, holders, base)
             if was_complete:
                 fn = self.labels.of(type_name)
                 sqlite_labels.installed(con, chunk_id, revisions, fn)

@@ -51,7 +51,7 @@ def _chain_holds(store: ReplicaStore, chunk: ChunkId) -> bool:
     revisions = store.chunk_revisions(chunk)
     commits = {c.id: c for c in store.chunk_commits(chunk)}
     try:
-        rebuilt = chain.rebuild(chunk, commits, revisions)
+        rebuilt = chain.rebuild(chunk, commits, revisions, store.chain_base(chunk))
     except KeyError:  # a revision whose commit record is gone
         return False
     return rebuilt[: len(links)] == links
@@ -60,9 +60,10 @@ def _chain_holds(store: ReplicaStore, chunk: ChunkId) -> bool:
 def check_chain(store: ReplicaStore, chunk: ChunkId) -> list[str]:
     """What is wrong with `chunk`'s history against its chain; empty when sound."""
     problems: list[str] = []
-    previous = chain.GENESIS
+    base = store.chain_base(chunk)  # commits `gc` took revisions of: their links stand
+    previous = base[-1][1] if base else chain.GENESIS
     links = store.chain_links(chunk)
-    for commit_id, stored in links:
+    for commit_id, stored in links[len(base) :]:
         record = store.commit_record(commit_id)
         if record is None:
             problems.append(

@@ -2,7 +2,8 @@
 
 A holder that joins a chunk's group, or lags behind what its leader's log still
 holds after compaction, receives a snapshot: the chunk's whole history (revisions
-and commit records), its clock, and what its log recorded of multi-chunk
+and commit records, since its last `gc`, and the chain's links for what `gc` took),
+its clock, and what its log recorded of multi-chunk
 transactions (a prepare that still holds the chunk, and every decision, so a late
 prepare or decision is decided here as everywhere else). Installing it replaces
 the replica in one store transaction with the applied index, and rebuilds the
@@ -26,22 +27,27 @@ class StoreStates:
         self.store = store
 
     def take(self, chunk: ChunkId) -> bytes:
-        """The chunk's state as this replica holds it now (at its applied index)."""
+        """The chunk's state as this replica holds it now (at its applied index).
+
+        The history is read before the chain's compacted part: a `gc` in between
+        leaves the history a superset of what the part's links leave to rebuild
+        (its commits after them are whole), so the receiver's chain is ours."""
         store = self.store
         table = store.chunk_table(chunk)
+        revisions = store.chunk_revisions_pb(chunk)  # as messages: no typed revisions between
+        commits = tuple(store.chunk_commits(chunk))
         txs = tuple(TxState(c, r.state, r.time, r.data) for c, r in store.raft_txs(chunk))
-        return codec.encode_chunk_state(
-            ChunkState(
-                table,
-                store.tables()[table],
-                store.raft_time(chunk),
-                (),  # given as messages below, read from the store without typed revisions
-                tuple(store.chunk_commits(chunk)),
-                txs,
-                store.replication(chunk),
-            ),
-            store.chunk_revisions_pb(chunk),
+        state = ChunkState(
+            table,
+            store.tables()[table],
+            store.raft_time(chunk),
+            (),  # given as `revisions` below
+            commits,
+            txs,
+            store.replication(chunk),
+            tuple(store.chain_base(chunk)),
         )
+        return codec.encode_chunk_state(state, revisions)
 
     def install(self, chunk: ChunkId, data: bytes, index: int) -> None:
         """Make this replica the snapshot's state at log `index`, atomically.
@@ -54,7 +60,13 @@ class StoreStates:
         store = self.store
         with store.exclusive():
             store.install_chunk(
-                chunk, state.table, state.type_name, state.revisions, state.commits, []
+                chunk,
+                state.table,
+                state.type_name,
+                state.revisions,
+                state.commits,
+                [],
+                state.compacted,
             )
             # The sender's records are a superset of ours: ours came from entries before
             # the snapshot's index, and a chunk's log never forgets a transaction.

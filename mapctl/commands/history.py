@@ -1,4 +1,4 @@
-"""`log` and `show`: the repository's history."""
+"""`log`, `show` and `gc`: the repository's history."""
 
 from __future__ import annotations
 
@@ -82,7 +82,43 @@ def show(session: Session, commit_ref: str, as_json: bool) -> None:
     )
 
 
+@click.command("gc")
+@click.option(
+    "--keep-since",
+    metavar="TIME",
+    help="Keep what a read at this logical time or later sees (a time, or a commit id: its time).",
+)
+@click.option(
+    "--keep", type=click.IntRange(1), metavar="N", help="Keep each item's N newest revisions."
+)
+@json_option
+@pass_session
+def gc(session: Session, keep_since: str | None, keep: int | None, as_json: bool) -> None:
+    """Drop old history: the revisions no read at or after a horizon sees.
+
+    Never an item's newest revision, and never what an open view or a running
+    transaction may read: the horizon stops at the oldest of them. With neither
+    option, `retention = N` under [history] in .mapapi/config.toml gives --keep.
+    Each holder compacts its own replicas; `log` keeps every commit record."""
+    from mapctl import render
+
+    done = session.call("gc", keep_since=keep_since, keep=keep)
+    if as_json:
+        render.emit_json(done)
+        return
+    kept = f", each item's newest {done['keep']} kept" if done["keep"] else ""
+    render.line(
+        f"dropped {done['revisions']} revision(s) of {done['items']} item(s) "
+        f"({render.size_text(done['bytes'])} of payloads) from {done['chunks']} chunk(s)"
+    )
+    render.line(
+        f"horizon: time {done['horizon']} (set by {done['set_by']}){kept}; "
+        f"the store holds {render.size_text(done['store_bytes'])} (freed pages are reused)"
+    )
+
+
 def register(cli: click.Group) -> None:
     """Add this module's commands to `cli`."""
     cli.add_command(log)
     cli.add_command(show)
+    cli.add_command(gc)

@@ -77,6 +77,7 @@ def run_offline(out: Outputs, root: Path) -> Path:
     out.run(("log",), "counters", counter["id"], repo=repo)
     out.run(("show",), record["commit"], repo=repo)
     out.run(("fsck",), repo=repo)
+    out.run(("gc",), "--keep", "1", repo=repo)
     out.run(("table", "list"), repo=repo)
     out.run(("chunk", "list"), repo=repo)
     _conflict(out, repo, point["id"])

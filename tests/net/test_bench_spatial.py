@@ -45,6 +45,8 @@ KEYS = {
     "bytes_moved",
     "rows_whole",
     "bytes_whole",
+    "share_moved",
+    "share_moved_max",
     "mismatches",
 }
 
@@ -78,6 +80,7 @@ def check_rows(rows: list[dict[str, Any]], dataset: str, cells: list[int], queri
         assert 1 <= row["cells_asked"] <= row["cells"]
         assert row["rows_moved"] <= row["rows_whole"]
         assert row["bytes_moved"] <= row["bytes_whole"]
+        assert 0 <= row["share_moved"] <= row["share_moved_max"] <= 1
     first = rows[0]  # one cell holds every chunk: all of them travel without filtering
     assert first["returned_all"] == first["missions"] + first["tiles"]
     assert first["returned_exact"] == first["matches"] + first["tiles_found"]

@@ -189,15 +189,21 @@ class Writer(Ledger):
         return (await self.commits.commit(tx, message)).record
 
 
-async def item_group(world: World, chunk: ChunkId, item: ItemId) -> tuple[Writer, Writer]:
-    """Three writers founding `chunk` with `item` in it; (a follower, the leader)."""
+async def founding_writers(world: World, chunk: ChunkId, table: str) -> tuple[list[Writer], Writer]:
+    """Three writers founding `chunk` of `table`; them, and their leader."""
     nodes = [await world.add(kind=Writer) for _ in range(3)]
     for node in nodes:
-        node.store.add_table("t", OPAQUE)
-        node.store.add_chunk(chunk, "t")
+        node.store.add_table(table, OPAQUE)
+        node.store.add_chunk(chunk, table)
         node.groups.found(chunk, [n.id for n in nodes])
     leader = await leader_of(nodes, chunk)
     assert isinstance(leader, Writer)
+    return nodes, leader
+
+
+async def item_group(world: World, chunk: ChunkId, item: ItemId) -> tuple[Writer, Writer]:
+    """Three writers founding `chunk` with `item` in it; (a follower, the leader)."""
+    nodes, leader = await founding_writers(world, chunk, "t")
     first = Transaction(leader, 0, leader.id)
     first.stage(Change(Op.INSERT, "t", item, chunk, b"0"))
     await first.commit("0")

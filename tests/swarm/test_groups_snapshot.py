@@ -10,7 +10,7 @@ from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId
 from mapapi.core.transaction import Transaction
 from mapapi.swarm.group_members import change_members
-from tests.swarm.raft_world import OPAQUE, World, Writer, leader_of
+from tests.swarm.raft_world import OPAQUE, World, Writer, founding_writers
 from tests.swarm.raft_world import world as world  # the fixture
 
 CHUNK = ChunkId.new()
@@ -28,6 +28,13 @@ async def increment(node: Writer, times: int) -> None:
         await tx.commit("+1")
 
 
+async def compacting_group(world: World) -> tuple[list[Writer], Writer]:
+    """Three writers founding CHUNK's group, whose logs compact every 5 entries,
+    and its leader."""
+    world.compact_after = 5
+    return await founding_writers(world, CHUNK, "counters")
+
+
 def same_replica(a: Writer, b: Writer) -> bool:
     """Both hold the same history, clock and hash chain of the chunk."""
     return (
@@ -40,14 +47,8 @@ def same_replica(a: Writer, b: Writer) -> bool:
 async def test_a_holder_joining_after_compaction_catches_up_from_a_snapshot(
     world: World,
 ) -> None:
-    world.compact_after = 5
-    nodes = [await world.add(kind=Writer) for _ in range(3)]
-    for node in nodes:
-        node.store.add_table("counters", OPAQUE)
-        node.store.add_chunk(CHUNK, "counters")
-        node.groups.found(CHUNK, [n.id for n in nodes])
-    leader = await leader_of(nodes, CHUNK)  # type: ignore[arg-type]
-    await increment(leader, 12)  # type: ignore[arg-type]
+    nodes, leader = await compacting_group(world)
+    await increment(leader, 12)
     kept = leader.store.raft_load(CHUNK)
     assert kept is not None
     assert kept.snap_index > 1  # the log before it is gone: only a snapshot can catch up

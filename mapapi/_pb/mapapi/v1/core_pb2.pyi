@@ -178,7 +178,7 @@ class ChunkLogEntry(_message.Message):
     def __init__(self, proposal: _Optional[_Union[CommitProposal, _Mapping]] = ..., decision: _Optional[_Union[TxDecision, _Mapping]] = ..., floor: _Optional[_Union[TimeFloor, _Mapping]] = ...) -> None: ...
 
 class ChunkSnapshot(_message.Message):
-    __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs", "replication")
+    __slots__ = ("table", "type_name", "time", "revisions", "commits", "txs", "replication", "compacted")
     TABLE_FIELD_NUMBER: _ClassVar[int]
     TYPE_NAME_FIELD_NUMBER: _ClassVar[int]
     TIME_FIELD_NUMBER: _ClassVar[int]
@@ -186,6 +186,7 @@ class ChunkSnapshot(_message.Message):
     COMMITS_FIELD_NUMBER: _ClassVar[int]
     TXS_FIELD_NUMBER: _ClassVar[int]
     REPLICATION_FIELD_NUMBER: _ClassVar[int]
+    COMPACTED_FIELD_NUMBER: _ClassVar[int]
     table: str
     type_name: str
     time: int
@@ -193,7 +194,16 @@ class ChunkSnapshot(_message.Message):
     commits: _containers.RepeatedCompositeFieldContainer[CommitRecord]
     txs: _containers.RepeatedCompositeFieldContainer[TxState]
     replication: int
-    def __init__(self, table: _Optional[str] = ..., type_name: _Optional[str] = ..., time: _Optional[int] = ..., revisions: _Optional[_Iterable[_Union[Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[CommitRecord, _Mapping]]] = ..., txs: _Optional[_Iterable[_Union[TxState, _Mapping]]] = ..., replication: _Optional[int] = ...) -> None: ...
+    compacted: _containers.RepeatedCompositeFieldContainer[ChainLink]
+    def __init__(self, table: _Optional[str] = ..., type_name: _Optional[str] = ..., time: _Optional[int] = ..., revisions: _Optional[_Iterable[_Union[Revision, _Mapping]]] = ..., commits: _Optional[_Iterable[_Union[CommitRecord, _Mapping]]] = ..., txs: _Optional[_Iterable[_Union[TxState, _Mapping]]] = ..., replication: _Optional[int] = ..., compacted: _Optional[_Iterable[_Union[ChainLink, _Mapping]]] = ...) -> None: ...
+
+class ChainLink(_message.Message):
+    __slots__ = ("commit_id", "link")
+    COMMIT_ID_FIELD_NUMBER: _ClassVar[int]
+    LINK_FIELD_NUMBER: _ClassVar[int]
+    commit_id: bytes
+    link: bytes
+    def __init__(self, commit_id: _Optional[bytes] = ..., link: _Optional[bytes] = ...) -> None: ...
 
 class TxState(_message.Message):
     __slots__ = ("commit_id", "state", "time", "data")
