@@ -53,7 +53,7 @@ from mapapi.lookup.spatial_index import QueryStats, SpatialIndex, SpatialRef
 from mapapi.maps import read_g2o, read_kimera
 from mapapi.net import LinkShape, Shaper
 from mapbench.ring import still_ring
-from mapbench.spatial_tiles import MissionPart, Moved, TilePart, mission_part, segments
+from mapbench.spatial_tiles import MissionPart, Moved, TilePart, mission_part, pose_boxes, segments
 
 log = logging.getLogger(__name__)
 
@@ -206,6 +206,7 @@ def measure_spatial(
     seed: int = 0,
     fraction: float = BOX_FRACTION,
     samples: Path = SAMPLES,
+    around_poses: bool = False,
 ) -> list[dict[str, Any]]:
     """Register `dataset`'s missions in a ring of `peers` nodes under every grid of
     `cells`, then time `queries` queries for each cell count and latency.
@@ -217,8 +218,11 @@ def measure_spatial(
         peers: nodes on the ring.
         queries: query boxes (`query_boxes`), each asked from a random node.
         seed: seeds the node ids, the holders, the boxes and the asking nodes.
-        fraction: a query box's side as a fraction of the extent.
+        fraction: a query box's side as a fraction of the extent; with
+            `around_poses`, the share of the poses a box holds.
         samples: the folder holding the sample maps.
+        around_poses: boxes around random poses, each holding `fraction` of
+            the poses (`pose_boxes`), instead of boxes of a fixed size.
 
     Returns:
         One JSON-ready row per (cell count, latency), in that order: dataset,
@@ -241,7 +245,10 @@ def measure_spatial(
     shapes = [LinkShape(latency=ms / 1e3) for ms in latencies_ms]  # ValueError if negative
     data = load_dataset(dataset, samples)
     grids = [grid_for(data, count) for count in cells]
-    boxes = query_boxes(data, queries, seed=seed, fraction=fraction)
+    if around_poses:
+        boxes = pose_boxes(data.parts, data.extent, data.vertical, queries, fraction, seed)
+    else:
+        boxes = query_boxes(data, queries, seed=seed, fraction=fraction)
     return asyncio.run(_measure(data, grids, shapes, peers, boxes, random.Random(seed)))
 
 

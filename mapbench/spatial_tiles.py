@@ -6,6 +6,8 @@ encoded as an import encodes them (`mapapi.maps.importer.build_rows`)."""
 from __future__ import annotations
 
 import hashlib
+import math
+import random
 from collections.abc import Mapping, Set
 from dataclasses import dataclass, replace
 
@@ -47,6 +49,7 @@ class MissionPart:
     bbox: BBox
     row_bytes: int
     tiles: tuple[TilePart, ...]
+    points: tuple[tuple[float, float, float], ...] = ()  # its vertices' positions
 
     @property
     def chunk(self) -> ChunkId:
@@ -84,7 +87,38 @@ def mission_part(graph: MissionGraph) -> MissionPart | None:
         )
         for number, tile in enumerate(tile_graph(graph))
     )
-    return MissionPart(graph.name, box, rows[MISSIONS][0].ByteSize(), tiles)
+    points = tuple((p[0], p[1], p[2]) for p in graph.vertices.values())
+    return MissionPart(graph.name, box, rows[MISSIONS][0].ByteSize(), tiles, points)
+
+
+def pose_boxes(
+    parts: Mapping[str, MissionPart],
+    extent: BBox,
+    vertical: int,
+    count: int,
+    share: float,
+    seed: int,
+) -> list[BBox]:
+    """`count` seeded boxes, each the smallest square (over the horizontal axes,
+    all of `extent` along the `vertical` one) around a random pose that holds
+    `share` of all the poses: boxes that hold a given part of the map, however
+    unevenly its poses spread."""
+    import numpy as np  # only this bench needs it here
+
+    points = np.array([p for part in parts.values() for p in part.points])
+    across = [axis for axis in range(3) if axis != vertical]
+    rng = random.Random(f"{seed}:poses")
+    wanted = max(1, math.ceil(share * len(points)))
+    boxes = []
+    for _ in range(count):
+        centre = points[rng.randrange(len(points))]
+        reach = np.max(np.abs(points[:, across] - centre[across]), axis=1)
+        half = float(np.partition(reach, wanted - 1)[wanted - 1])
+        lows, highs = list(extent.mins), list(extent.maxs)
+        for axis in across:
+            lows[axis], highs[axis] = centre[axis] - half, centre[axis] + half
+        boxes.append(BBox(*lows, *highs))
+    return boxes
 
 
 @dataclass(frozen=True)

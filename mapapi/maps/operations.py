@@ -50,6 +50,9 @@ if TYPE_CHECKING:
 Json = Any
 T = TypeVar("T")
 
+LOAD_PARALLEL = 8
+"""Chunks `load_bbox` joins at once."""
+
 
 def _box(box: BBox | None) -> list[float] | None:
     return None if box is None else list(box.as_tuple())
@@ -272,13 +275,13 @@ class MapOperations:
         loaded: list[Json] = []
         self._loads[key] = (0, len(todo))
         try:
-            loaded += [await self._load(key, chunk, todo) for chunk in todo]
+            loaded += await self._load_all(key, todo, todo)
             names = {name for r in found for name in r["missions"]}
             held = set(self.peer.store.chunk_ids())
             parts = await mission_parts(self.peer, names)
             more = sorted({c for p in parts.values() for c in p.in_box(box)} - held)
             todo += more
-            loaded += [await self._load(key, chunk, todo) for chunk in more]
+            loaded += await self._load_all(key, more, todo)
         finally:
             self._loads.pop(key, None)
         results = await self._query(bbox, table) if loaded else found
@@ -293,10 +296,28 @@ class MapOperations:
         found = await self.peer.query_bbox(BBox.from_tuple(bbox), table)
         return [placed_json(f) for f in found]
 
+    async def _load_all(self, key: str, chunks: list[ChunkId], todo: list[ChunkId]) -> list[Json]:
+        """Participate in `chunks`, `LOAD_PARALLEL` at a time (each join is a few
+        round trips and a snapshot: one after another, a mission's tiles took
+        seconds); what each moved, in the order of `chunks`."""
+        gate = asyncio.Semaphore(LOAD_PARALLEL)
+
+        async def one(chunk: ChunkId) -> Json:
+            async with gate:
+                return await self._load(key, chunk, todo)
+
+        try:
+            async with asyncio.TaskGroup() as group:  # a failed join cancels the others
+                tasks = [group.create_task(one(chunk)) for chunk in chunks]
+        except ExceptionGroup as failed:  # the caller sees the error itself (its exit code)
+            raise failed.exceptions[0] from None
+        return [task.result() for task in tasks]
+
     async def _load(self, key: str, chunk: ChunkId, todo: list[ChunkId]) -> Json:
         peer = online(self.peer)
         table = await peer.participate(chunk)
-        self._loads[key] = (todo.index(chunk) + 1, len(todo))
+        done, _ = self._loads.get(key, (0, 0))
+        self._loads[key] = (done + 1, len(todo))
         counted = await peer.off_loop(peer.store.chunks, None, chunk)  # that chunk's rows only
         items, size = (counted[0].items, counted[0].bytes) if counted else (0, 0)
         return {"chunk": chunk, "table": table, "items": items, "bytes": size}

@@ -202,7 +202,13 @@ def bench_lookup(
     default=0.1,
     show_default=True,
     type=click.FloatRange(0, 1, min_open=True),
-    help="A query box's side as a fraction of the map's horizontal extent.",
+    help="A query box's side as a fraction of the map's horizontal extent "
+    "(with --around-poses: the share of the poses a box holds).",
+)
+@click.option(
+    "--around-poses",
+    is_flag=True,
+    help="Boxes around random poses, each holding --fraction of the poses.",
 )
 @click.option(
     "--seed", default=0, show_default=True, help="Seeds node ids, holders, boxes and askers."
@@ -218,6 +224,7 @@ def bench_spatial(
     peers: int,
     queries: int,
     fraction: float,
+    around_poses: bool,
     seed: int,
     samples: Path | None,
     plot: str | None,
@@ -249,6 +256,7 @@ def bench_spatial(
             seed=seed,
             fraction=fraction,
             samples=samples or spatial.SAMPLES,
+            around_poses=around_poses,
         ):
             title = (
                 f"bench spatial: {row['dataset']}, {row['cells']} cells, {row['latency_ms']:g} ms"

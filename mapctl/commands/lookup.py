@@ -50,7 +50,7 @@ def query_bbox(
                 lambda state: show(state["loaded"], state["of"]),
             )
         if not as_json:
-            for c in info["loaded"]:
+            for c in info["loaded"] if session.verbose else ():  # a mission has many tiles
                 items = f"{c['items']} item{'' if c['items'] == 1 else 's'}"
                 render.note(f"loaded chunk {c['chunk']} ({c['table']}, {items})")
             if info["loaded"]:

@@ -22,6 +22,7 @@ from mapbench.spatial import (
     measure_spatial,
     query_boxes,
 )
+from mapbench.spatial_tiles import pose_boxes
 from mapctl.cli import cli
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
@@ -149,3 +150,25 @@ class TestCommand:
         assert "bench spatial: tunnels, 4 cells, 0 ms" in result.output
         for key in KEYS - {"dataset", "cells", "latency_ms"}:
             assert key in result.output, key
+
+
+def test_boxes_around_poses_each_hold_their_share_of_the_poses() -> None:
+    intel = load_dataset(str(SAMPLES / "pose_graphs" / "intel.g2o"))
+    (part,) = intel.parts.values()
+    boxes = pose_boxes(intel.parts, intel.extent, intel.vertical, 20, 0.05, seed=1)
+    assert boxes == pose_boxes(intel.parts, intel.extent, intel.vertical, 20, 0.05, seed=1)
+    for box in boxes:
+        inside = sum(box.overlaps(BBox(*p, *p)) for p in part.points)
+        assert inside >= 0.05 * len(part.points)  # the smallest square that holds 5 %
+        assert (box.zmin, box.zmax) == (intel.extent.zmin, intel.extent.zmax)
+    rows = measure_spatial(
+        str(SAMPLES / "pose_graphs" / "intel.g2o"),
+        cells=(4,),
+        latencies_ms=(0,),
+        peers=3,
+        queries=5,
+        fraction=0.05,
+        around_poses=True,
+    )
+    assert rows[0]["tiles_found"] >= 1
+    assert rows[0]["share_moved"] < 1
