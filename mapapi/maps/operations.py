@@ -32,7 +32,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from mapapi.core.errors import UsageError
+from mapapi.core.errors import RequestTimeout, UsageError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.schema import CLOUDS, MISSIONS
@@ -50,8 +50,10 @@ if TYPE_CHECKING:
 Json = Any
 T = TypeVar("T")
 
-LOAD_PARALLEL = 8
+LOAD_PARALLEL = 4
 """Chunks `load_bbox` joins at once."""
+JOIN_ATTEMPTS = 3
+"""Times `load_bbox` asks for a chunk whose state is late (each waits `PROPOSE_TIMEOUT`)."""
 
 
 def _box(box: BBox | None) -> list[float] | None:
@@ -315,7 +317,13 @@ class MapOperations:
 
     async def _load(self, key: str, chunk: ChunkId, todo: list[ChunkId]) -> Json:
         peer = online(self.peer)
-        table = await peer.participate(chunk)
+        for attempt in range(1, JOIN_ATTEMPTS + 1):
+            try:
+                table = await peer.participate(chunk)
+                break
+            except RequestTimeout:  # taken in, its state late: asking again waits for it
+                if attempt == JOIN_ATTEMPTS:
+                    raise
         done, _ = self._loads.get(key, (0, 0))
         self._loads[key] = (done + 1, len(todo))
         counted = await peer.off_loop(peer.store.chunks, None, chunk)  # that chunk's rows only
