@@ -10,6 +10,7 @@ from collections.abc import Awaitable, Callable
 import pytest
 
 from mapapi import ConflictError, Op, Peer, UsageError
+from mapapi.core.errors import RequestTimeout
 from mapapi.net import Ping
 from tests.swarm.conftest import (
     TABLE,
@@ -25,6 +26,20 @@ from tests.swarm.conftest import (
 
 
 class TestParticipation:
+    async def test_asking_again_after_a_late_state_waits_for_it(self, swarm: MakeSwarm) -> None:
+        """A join whose state does not arrive in time leaves this peer a member of the
+        group; asking to participate again waits for the state instead of returning
+        at once with nothing here (`query-bbox --load` asks again)."""
+        a, b = await swarm(2)
+        chunk, item = await counter_chunk(a, 7)
+        with pytest.raises(RequestTimeout, match="did not arrive within 0 s"):
+            await net(b).group_members.join(chunk, via=a.id, timeout=0)
+        assert net(b).replicator.holds(chunk)  # taken in, its state on its way
+
+        assert await b.participate(chunk) == TABLE
+
+        assert await value(b, item) == 7
+
     @pytest.mark.parametrize("n", [2, 5, 8])
     async def test_replication_after_participate_and_after_commits(
         self, swarm: MakeSwarm, n: int
