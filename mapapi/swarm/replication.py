@@ -19,7 +19,7 @@ import logging
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from mapapi.core.errors import ChunkNotFound, MapError, NoPeersError, RequestTimeout, UsageError
+from mapapi.core.errors import ChunkNotFound, MapError, NoPeersError, UsageError
 from mapapi.core.ids import ChunkId, ItemId, PeerId
 from mapapi.lookup.dht.announce import Announcements, Entry
 from mapapi.lookup.dht.ring import chunk_key
@@ -37,7 +37,7 @@ from mapapi.net.rpc import Request, Rpc
 from mapapi.store.base import ReplicaStore
 from mapapi.store.offload import off_loop
 from mapapi.swarm.group_members import GroupMembers
-from mapapi.swarm.groups import PROPOSE_TIMEOUT, RaftGroups
+from mapapi.swarm.groups import RaftGroups
 from mapapi.swarm.membership import Members
 
 if TYPE_CHECKING:
@@ -124,10 +124,9 @@ class Replicator:
         Raises:
             ChunkNotFound: no known member holds it.
             RequestTimeout: its state did not arrive in time (asking again waits
-                for it anew: this peer is a member already).
+                for it anew: this peer stays a member).
         """
-        if self.holds(chunk):
-            await self._arrived(chunk)
+        if self.holds(chunk) and self._arrived(chunk):
             return self.store.chunk_table(chunk)
         joining = self._joining.get(chunk)
         if joining is not None:  # another caller here asked already: one join per chunk
@@ -146,27 +145,16 @@ class Replicator:
         done.set_result(None)
         return table
 
-    async def _arrived(self, chunk: ChunkId) -> None:
-        """Wait for the state of a chunk whose group took this peer in, if it has not
-        arrived yet (an earlier join timed out waiting for it, say while the leader
-        sent eight snapshots at once); at once for a chunk held here.
-
-        Raises:
-            RequestTimeout: it did not arrive within `PROPOSE_TIMEOUT`.
-        """
+    def _arrived(self, chunk: ChunkId) -> bool:
+        """Whether the chunk's state is here. A peer whose join timed out waiting for
+        it (say while the leader sent several snapshots at once) is a member without
+        it: asking again joins again, which waits for the state and the log up to
+        the change that took it in."""
         try:
             self.store.chunk_table(chunk)
-            return
         except ChunkNotFound:
-            pass
-        try:
-            async with asyncio.timeout(PROPOSE_TIMEOUT):
-                while self.groups.applied(chunk) == 0:
-                    await self.groups.progressed(chunk)
-        except TimeoutError:
-            raise RequestTimeout(
-                f"chunk {chunk.short}: its state did not arrive within {PROPOSE_TIMEOUT:g} s"
-            ) from None
+            return False
+        return True
 
     async def _participate(self, chunk: ChunkId, progress: Progress | None) -> str:
         last: MapError | None = None
