@@ -26,6 +26,7 @@ from mapbench.spatial_tiles import pose_boxes
 from mapctl.cli import cli
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
+GARAGE = SAMPLES / "pose_graphs" / "parking-garage.g2o"
 KEYS = {
     "dataset",
     "cells",
@@ -97,11 +98,11 @@ class TestGeometry:
         assert len(load_dataset("parking-garage", SAMPLES).missions) == 17  # 1,661 / 100
 
     def test_a_g2o_file_is_a_data_set_of_its_tiled_missions(self) -> None:
-        intel = load_dataset(str(SAMPLES / "pose_graphs" / "intel.g2o"))
-        assert (intel.name, list(intel.missions)) == ("intel", ["intel"])
-        (part,) = intel.parts.values()
+        garage = load_dataset(str(SAMPLES / "pose_graphs" / "parking-garage.g2o"))
+        assert (garage.name, list(garage.missions)) == ("parking-garage", ["parking-garage"])
+        (part,) = garage.parts.values()
         assert len(part.tiles) == 4
-        assert part.rows == 1 + 1_728 + 2_512
+        assert part.rows == 1 + 1_661 + 6_275
         assert part.bytes == part.row_bytes + sum(t.bytes for t in part.tiles)
         with pytest.raises(UsageError, match=r"or a \.g2o file"):
             load_dataset("nowhere")
@@ -153,16 +154,16 @@ class TestCommand:
 
 
 def test_boxes_around_poses_each_hold_their_share_of_the_poses() -> None:
-    intel = load_dataset(str(SAMPLES / "pose_graphs" / "intel.g2o"))
-    (part,) = intel.parts.values()
-    boxes = pose_boxes(intel.parts, intel.extent, intel.vertical, 20, 0.05, seed=1)
-    assert boxes == pose_boxes(intel.parts, intel.extent, intel.vertical, 20, 0.05, seed=1)
+    garage = load_dataset(str(GARAGE))
+    (part,) = garage.parts.values()
+    boxes = pose_boxes(garage.parts, garage.extent, garage.vertical, 20, 0.05, seed=1)
+    assert boxes == pose_boxes(garage.parts, garage.extent, garage.vertical, 20, 0.05, seed=1)
     for box in boxes:
         inside = sum(box.overlaps(BBox(*p, *p)) for p in part.points)
         assert inside >= 0.05 * len(part.points)  # the smallest square that holds 5 %
-        assert (box.zmin, box.zmax) == (intel.extent.zmin, intel.extent.zmax)
+        assert (box.zmin, box.zmax) == (garage.extent.zmin, garage.extent.zmax)
     rows = measure_spatial(
-        str(SAMPLES / "pose_graphs" / "intel.g2o"),
+        str(GARAGE),
         cells=(4,),
         latencies_ms=(0,),
         peers=3,

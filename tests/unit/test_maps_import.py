@@ -28,6 +28,7 @@ from mapapi.maps.stored import mission_parts
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
+GARAGE = SAMPLES / "pose_graphs" / "parking-garage.g2o"
 
 
 async def counts(peer: Peer) -> dict[str, int]:
@@ -56,14 +57,14 @@ class TestImportGraph:
             2_512,
         )
         assert await counts(peer) == {MISSIONS: 1, VERTICES: 1_728, EDGES: 2_512}
-        # 1,728 vertices in 30 m: cut by count into tiles of at most TILE_VERTICES
-        assert len(result.tiles) == 4
+        # 1,728 vertices in 26 m: one tile (at most TILE_VERTICES, TILE_EXTENT wide)
+        assert len(result.tiles) == 1
         assert {t: len(peer.chunks(t)) for t in (MISSIONS, VERTICES, EDGES)} == {
             MISSIONS: 1,
-            VERTICES: 4,
-            EDGES: 4,
+            VERTICES: 1,
+            EDGES: 1,
         }
-        assert [t.vertex_count for t in result.tiles] == [432] * 4
+        assert [t.vertex_count for t in result.tiles] == [1_728]
         assert sum(t.edge_count for t in result.tiles) == 2_512
         held = {c.id: c.items for c in peer.chunks()}
         for tile in result.tiles:
@@ -92,8 +93,8 @@ class TestImportGraph:
 
         assert len(peer.log()) == 8 == len({r.commit for r in results})
         assert await counts(peer) == {MISSIONS: 8, VERTICES: 1_255, EDGES: 1_247 + 96 + 3_548}
-        # a robot's path of more than TILE_MIN_VERTICES poses wider than TILE_EXTENT is cut
-        assert len(peer.chunks(VERTICES)) == 15 == sum(len(r.tiles) for r in results)
+        # each robot's path has fewer poses than TILE_MIN_VERTICES: not cut, however long
+        assert len(peer.chunks(VERTICES)) == 8 == sum(len(r.tiles) for r in results)
         tx = peer.begin()
         kinds = [e.kind for e in (await tx.items(EDGES)).values()]
         assert kinds.count(EdgeKind.INTER_ROBOT.value) == 3_548
@@ -115,15 +116,17 @@ class TestImportGraph:
 
     async def test_a_box_needs_the_mission_row_and_the_tiles_it_overlaps(self) -> None:
         peer = Peer.in_memory()
-        intel = await import_graph(peer, read_g2o(INTEL))
-        first, *others = intel.tiles
-        (parts,) = (await mission_parts(peer, ["intel"])).values()
+        garage = await import_graph(peer, read_g2o(GARAGE))  # 1,661 poses over 270 m: 4 tiles
+        first, *others = garage.tiles
+        (parts,) = (await mission_parts(peer, ["parking-garage"])).values()
 
-        assert parts.in_box(first.bbox) >= {intel.chunks[MISSIONS], *first.chunks()}
+        assert len(others) == 3
+        assert parts.in_box(first.bbox) >= {garage.chunks[MISSIONS], *first.chunks()}
         inside = BBox(*first.bbox.mins, *first.bbox.mins)  # a corner of the first tile only
         assert not any(t.bbox.overlaps(inside) for t in others)
-        assert parts.in_box(inside) == {intel.chunks[MISSIONS], *first.chunks()}
-        assert parts.in_box(intel.bbox) == set(intel.all_chunks())
+        assert parts.in_box(inside) == {garage.chunks[MISSIONS], *first.chunks()}
+        assert garage.bbox is not None
+        assert parts.in_box(garage.bbox) == set(garage.all_chunks())
 
     async def test_renaming_moves_the_missions_own_edge_ends(self) -> None:
         peer = Peer.in_memory()
