@@ -105,7 +105,8 @@ def tile_graph(
     max_extent: float = TILE_EXTENT,
     min_vertices: int = TILE_MIN_VERTICES,
 ) -> list[Tile]:
-    """The tiles of `graph` (see the module docstring), in k-d order.
+    """The tiles of `graph` (see the module docstring), in k-d order; none for a
+    graph without vertices (an import refuses it).
 
     Raises:
         ValueError: `max_vertices` < 1 or `max_extent` <= 0.
@@ -114,6 +115,8 @@ def tile_graph(
         raise ValueError(
             f"tiles need max_vertices >= 1 and max_extent > 0, got {max_vertices} and {max_extent}"
         )
+    if not graph.vertices:
+        return []
     bounds = (max_vertices, max_extent, min_vertices)
     leaves = _split(sorted(graph.vertices), graph.vertices, *bounds)
     tile_of = {index: n for n, leaf in enumerate(leaves) for index in leaf}

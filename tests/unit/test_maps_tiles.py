@@ -109,6 +109,10 @@ def test_a_dense_graph_is_cut_by_count_and_a_long_path_by_extent() -> None:
     assert path(500, 1.0) == [499.0]  # too few poses to cut for extent
 
 
+def test_a_graph_without_vertices_has_no_tiles() -> None:
+    assert tile_graph(MissionGraph("m", "r", "f")) == []
+
+
 def test_bounds_that_cannot_hold_a_vertex_are_refused() -> None:
     with pytest.raises(ValueError, match="max_vertices"):
         tile_graph(MissionGraph("m", "r", "f"), max_vertices=0)
