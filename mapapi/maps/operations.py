@@ -281,7 +281,9 @@ class MapOperations:
             names = {name for r in found for name in r["missions"]}
             held = set(self.peer.store.chunk_ids())
             parts = await mission_parts(self.peer, names)
-            more = sorted({c for p in parts.values() for c in p.in_box(box)} - held)
+            found_chunks = {ChunkId(r["chunk"]) for r in found}
+            wanted = {c for p in parts.values() for c in p.in_box(box, found_chunks)}
+            more = sorted(wanted - held)
             todo += more
             loaded += await self._load_all(key, more, todo)
         finally:

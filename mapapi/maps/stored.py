@@ -15,7 +15,7 @@ them (`mapapi.maps.jobs`), so a serving peer's event loop keeps answering.
 from __future__ import annotations
 
 import logging
-from collections.abc import AsyncIterator, Iterable, Sequence
+from collections.abc import AsyncIterator, Collection, Iterable, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -216,10 +216,14 @@ class MissionParts:
     chunks: dict[str, ChunkId]
     tiles: tuple[TileChunks, ...] = ()
 
-    def in_box(self, box: BBox) -> set[ChunkId]:
+    def in_box(self, box: BBox, found: Collection[ChunkId] = ()) -> set[ChunkId]:
         """The chunks a load of `box` needs: the untiled ones, and the chunks of
-        every tile whose box overlaps `box`."""
-        tiled = {c for t in self.tiles if t.bbox.overlaps(box) for c in t.chunks()}
+        every tile whose box overlaps `box` or whose vertices are among `found`
+        (the spatial index places a tile where its vertices are now: one moved
+        out of the box the row lists is found there, and its edges must come)."""
+        tiled = {
+            c for t in self.tiles if t.bbox.overlaps(box) or t.vertices in found for c in t.chunks()
+        }
         return set(self.chunks.values()) | tiled
 
 

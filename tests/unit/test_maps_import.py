@@ -125,6 +125,9 @@ class TestImportGraph:
         inside = BBox(*first.bbox.mins, *first.bbox.mins)  # a corner of the first tile only
         assert not any(t.bbox.overlaps(inside) for t in others)
         assert parts.in_box(inside) == {garage.chunks[MISSIONS], *first.chunks()}
+        # a tile the index found in the box (a vertex moved there) comes with its edges
+        moved = others[0]
+        assert set(moved.chunks()) <= parts.in_box(inside, {moved.vertices})
         assert garage.bbox is not None
         assert parts.in_box(garage.bbox) == set(garage.all_chunks())
 
