@@ -9,9 +9,10 @@ command of `mapctl` runs `runs` times on the first copy, through the
 operations the CLI calls (`mapapi.app.operations`, as `mapctl` runs them on a
 repository whose peer is not running): `missions`, `export` of the mission to
 g2o, `plot` of the mission, `query-bbox --load` of the mission's box (nothing
-to fetch: every chunk is held here) and `ls` of the mission's vertices chunk.
-The figures are the median seconds of each, after one untimed pass at the first
-count (which loads matplotlib and the like); a flat curve against M is the goal.
+to fetch: every chunk is held here) and `ls` of its first vertices tile (its
+whole vertices chunk before tiles). The figures are the median seconds of each,
+after one untimed pass at the first count (which loads matplotlib and the
+like); a flat curve against M is the goal.
 Nothing here asserts a time; the figures go to docs/benchmarks.md.
 """
 
