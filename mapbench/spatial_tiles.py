@@ -1,7 +1,7 @@
 """What `mapctl bench spatial` registers of each mission: its row's box, and the
 spatial tiles an import would cut it into (`mapapi.maps.tiles`), each with the
 rows and bytes a `query-bbox --load` of it moves: its vertices and its edges,
-encoded as an import encodes them (`mapapi.maps.importer.build_rows`)."""
+encoded as an import encodes them (`mapapi.maps.rows.build_rows`)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from mapapi.core.ids import ChunkId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.graph import MissionGraph
-from mapapi.maps.importer import build_rows
+from mapapi.maps.rows import build_rows
 from mapapi.maps.schema import EDGES, MISSIONS, VERTICES
 from mapapi.maps.tiles import tile_graph
 

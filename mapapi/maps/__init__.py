@@ -25,7 +25,6 @@ if TYPE_CHECKING:
     from mapapi.maps.cloud import PointCloud
     from mapapi.maps.importer import (
         ImportResult,
-        build_rows,
         ensure_tables,
         import_cloud,
         import_graph,
@@ -33,14 +32,15 @@ if TYPE_CHECKING:
         import_missions,
     )
     from mapapi.maps.registration import Registration, linked_missions, register_missions
+    from mapapi.maps.rows import build_rows
     from mapapi.maps.stored import MissionInfo, list_missions, load_cloud, load_graph
 
 _LAZY = {
     "PointCloud": "mapapi.maps.cloud",
+    "build_rows": "mapapi.maps.rows",
     **dict.fromkeys(
         (
             "ImportResult",
-            "build_rows",
             "ensure_tables",
             "import_cloud",
             "import_graph",

@@ -21,9 +21,10 @@ from typing import TYPE_CHECKING
 
 from mapapi.core.ids import ChunkId, CommitId
 from mapapi.lookup.spatial import BBox
-from mapapi.maps.cloud import PointCloud, cloud_blocks
+from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import NO_ORIGIN, GraphEdge, MissionGraph
+from mapapi.maps.graph import GraphEdge, MissionGraph
+from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, vertex_rows
 from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
@@ -32,9 +33,7 @@ from mapapi.maps.schema import (
     MISSIONS,
     VERTICES,
     Mission,
-    edge_to_pb,
     mission_to_pb,
-    vertex_to_pb,
 )
 from mapapi.maps.stored import mission_names, reading
 from mapapi.maps.tiles import Tile, TileChunks, tile_graph
@@ -123,50 +122,6 @@ def rename(graph: MissionGraph, mission: str | None, robot: str | None) -> Missi
     )
 
 
-def check_graph(graph: MissionGraph) -> None:
-    """Refuse a graph an import cannot store.
-
-    Raises:
-        MapImportError: no name, no vertices, or an edge names a vertex the mission lacks.
-    """
-    if not graph.name:
-        raise MapImportError("a mission needs a name")
-    if not graph.vertices:
-        raise MapImportError("the graph has no vertices", source=graph.name)
-    name = graph.name
-    for edge in graph.edges:
-        for end in (edge.source, edge.target):
-            if end[0] == name and end[1] not in graph.vertices:
-                raise MapImportError(f"an edge names the missing vertex {end[1]}", source=name)
-
-
-def build_rows(graph: MissionGraph) -> dict[str, list[Message]]:
-    """Every row of a mission, by table, checked (`check_graph`).
-
-    Raises:
-        MapImportError: the graph is not importable.
-    """
-    check_graph(graph)
-    return {
-        MISSIONS: [mission_to_pb(graph)],
-        VERTICES: _vertex_rows(graph, list(graph.vertices)),
-        EDGES: _edge_rows(graph, range(len(graph.edges))),
-    }
-
-
-def build_cloud_rows(cloud: PointCloud) -> dict[str, list[Message]]:
-    """The mission row and the point blocks of a cloud.
-
-    Raises:
-        MapImportError: no name, or no points.
-    """
-    if not cloud.name:
-        raise MapImportError("a mission needs a name")
-    if len(cloud.points) == 0:
-        raise MapImportError("the cloud has no points", source=cloud.name)
-    return {MISSIONS: [mission_to_pb(cloud)], CLOUDS: list(cloud_blocks(cloud))}
-
-
 @dataclass(frozen=True)
 class _Part:
     """The rows of one chunk to create: of `table`, and of a tile when `tile` is set.
@@ -202,25 +157,12 @@ def _prepare(source: MapSource) -> _Prepared:
     summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"
     parts = []
     for tile in tiles:
-        vertices = partial(_vertex_rows, source, tile.vertices)
+        vertices = partial(vertex_rows, source, tile.vertices)
         parts.append(_Part(VERTICES, len(tile.vertices), vertices, tile))
         if tile.edges:
-            edges = partial(_edge_rows, source, tile.edges)
+            edges = partial(edge_rows, source, tile.edges)
             parts.append(_Part(EDGES, len(tile.edges), edges, tile))
     return _Prepared(source, mission_to_pb(source), parts, GRAPH_TABLES, summary)
-
-
-def _vertex_rows(graph: MissionGraph, indices: Sequence[int]) -> list[Message]:
-    """The rows of the vertices `indices`, with where the import read each."""
-    origins = graph.origins
-    return [
-        vertex_to_pb(graph.name, i, graph.vertices[i], origins.get(i, NO_ORIGIN)) for i in indices
-    ]
-
-
-def _edge_rows(graph: MissionGraph, positions: Sequence[int]) -> list[Message]:
-    """The rows of the edges at `positions` of the graph's edge list."""
-    return [edge_to_pb(graph.name, graph.edges[n]) for n in positions]
 
 
 async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) -> ImportResult:

@@ -16,7 +16,7 @@ than `max_vertices`, though their boxes then coincide.
 vertex is in the mission, else to the tile of its target. Loading a box loads every
 tile whose box overlaps it, and a vertex in the box lies in such a tile; so an
 edge whose ends both lie in the box is loaded with its source's tile. An edge that
-names no vertex of its mission at all (never written by an import: `build_rows`
+names no vertex of its mission at all (never written by an import: `check_graph`
 refuses it) goes to the first tile.
 """
 
