@@ -36,6 +36,7 @@ from mapapi.maps.se3 import Pose
 from mapapi.maps.source import read_source
 from mapapi.service.ops import Operations
 from mapapi.service.repo import Repository
+from mapapi.store.file_check import store_bytes
 from mapbench.lookup import environment
 from mapbench.maps import SAMPLES
 
@@ -181,7 +182,7 @@ async def _grow_and_read(
             points.append(
                 {
                     "missions": count,
-                    "store_bytes": _store_bytes(repo),
+                    "store_bytes": store_bytes(repo.store_path),
                     "import_s": round(imported, 3),
                     "seconds": {k: round(statistics.median(v), 4) for k, v in timed.items()},
                     "runs_s": {k: [round(s, 4) for s in v] for k, v in timed.items()},
@@ -224,9 +225,3 @@ async def _time_reads(reads: dict[str, Read], runs: int) -> dict[str, list[float
             await read()
             timed[name].append(time.perf_counter() - started)
     return timed
-
-
-def _store_bytes(repo: Repository) -> int:
-    """The store's size on disk: the SQLite file and its write-ahead log."""
-    path = repo.store_path
-    return sum(p.stat().st_size for p in (path, path.with_name(path.name + "-wal")) if p.exists())

@@ -30,6 +30,7 @@ from mapapi.core.ids import CommitId
 from mapapi.core.transaction import TxState
 from mapapi.service.repo import Repository
 from mapapi.service.workspace import Workspace
+from mapapi.store.file_check import store_bytes
 
 if TYPE_CHECKING:
     from mapapi.service.ops import Operation
@@ -86,7 +87,7 @@ class GcOperations:
                 )
         at, reason = horizon(self.peer, since)
         done = await self.peer.off_loop(compact, at, keep)
-        return {**asdict(done), "set_by": reason, "store_bytes": _size(path)}
+        return {**asdict(done), "set_by": reason, "store_bytes": store_bytes(path)}
 
     def _time_of(self, since: int | str | None) -> int | None:
         """A logical time, from a time or a commit id (prefix)."""
@@ -105,8 +106,3 @@ class GcOperations:
         record = self.peer.store.commit_record(CommitId(found[0]))
         assert record is not None  # resolved from the records
         return record.time
-
-
-def _size(path: Path) -> int:
-    """The store's bytes on disk: its file and write-ahead log."""
-    return sum(p.stat().st_size for p in (path, path.with_name(path.name + "-wal")) if p.exists())

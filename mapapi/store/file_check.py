@@ -161,3 +161,8 @@ def locate_payload(exc: CorruptPayload, store: object) -> CorruptPayload | None:
         for chunk in chunks(exc.table):
             items.update(str(r.item_id) for r in revisions(chunk.id) if r.data == exc.data)
     return exc.at(getattr(store, "path", "the store"), sorted(items))
+
+
+def store_bytes(path: Path) -> int:
+    """The store's size on disk: the SQLite file at `path` and its write-ahead log."""
+    return sum(p.stat().st_size for p in (path, path.with_name(path.name + "-wal")) if p.exists())
