@@ -10,7 +10,11 @@ that speaks for another peer, writes to another chunk or table than the chunk's,
 to an item of another chunk, twice to one item, or carries a payload that is not
 of the table's type (or any, for a removal) or is over the size limit, and a
 commit decision for a transaction prepared here by another peer (only its
-coordinator decides commit; anyone may decide abort, as recovery does).
+coordinator decides commit; anyone may decide abort, as recovery does), and
+an entry whose time is more than `limits.MAX_CLOCK_JUMP` ahead of the leader's
+clock: applying it moves the chunk's clock there, and one entry at
+`limits.MAX_LAMPORT` would stamp every later commit of the chunk with a time no
+peer accepts (found by the wire fuzzer).
 """
 
 from __future__ import annotations
@@ -28,7 +32,12 @@ from mapapi.store.base import ReplicaStore, Store
 
 
 def checked_entry(
-    store: ReplicaStore, chunk: ChunkId, data: bytes, sender: PeerId, members: Collection[PeerId]
+    store: ReplicaStore,
+    chunk: ChunkId,
+    data: bytes,
+    sender: PeerId,
+    members: Collection[PeerId],
+    now: int,
 ) -> LogEntry:
     """A writer's entry to `chunk`'s log, parsed and checked (`check_proposal`)
     before its leader proposes it; any thread (a big one is parsed in a worker).
@@ -38,7 +47,7 @@ def checked_entry(
         NotParticipatingError, UsageError, LimitExceeded: see `check_proposal`.
     """
     entry = codec.decode_entry(data)
-    check_proposal(store, chunk, entry, sender, members)
+    check_proposal(store, chunk, entry, sender, members, now)
     return entry
 
 
@@ -48,16 +57,18 @@ def check_proposal(
     entry: LogEntry,
     sender: PeerId,
     members: Collection[PeerId],
+    now: int,
 ) -> None:
     """Refuse an entry from `sender` to `chunk`'s log that would break the store
-    (see the module docstring); `members` are the group's.
+    (see the module docstring); `members` are the group's, `now` the leader's clock.
 
     Raises:
         ChunkNotFound: this peer does not hold `chunk`.
         NotParticipatingError: `sender` is no member of the chunk's group.
         UsageError: naming the first problem found.
-        LimitExceeded: a payload over `MAX_PAYLOAD_BYTES`.
+        LimitExceeded: a payload over `MAX_PAYLOAD_BYTES`, a time too far ahead.
     """
+    limits.clock_jump(now, entry.time)
     if isinstance(entry, TxDecision):
         _check_decision(store, chunk, entry, sender)
         return
@@ -68,6 +79,7 @@ def check_proposal(
         )
     if not isinstance(entry, Proposal):
         return
+    limits.clock_jump(now, entry.begin_time)
     if store.commit_record(entry.commit_id) and store.raft_tx(chunk, entry.commit_id) is None:
         raise UsageError(
             f"commit {entry.commit_id.short} exists already: a proposal needs a new commit id"

@@ -378,7 +378,7 @@ class LogCommits:
         if not self.groups.is_leader(body.chunk):
             raise NotChunkLeader.of(body.chunk, self.groups.leader(body.chunk))
         members = {self.groups.me, *self.groups.members(body.chunk)}
-        args = (self.groups.store, body.chunk, body.proposal, req.sender, members)
+        args = (self.groups.store, body.chunk, body.proposal, req.sender, members, self.clock.now())
         if heavy := len(body.proposal) >= HEAVY_BYTES:  # a mission's rows: in a worker
             entry = await off_loop(self.groups.store, checked_entry, *args)  # (issue 14 §1)
         else:
