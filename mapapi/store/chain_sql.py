@@ -63,7 +63,7 @@ def unwritten(
         chunk
         for chunk in {r.chunk_id for r in revisions}
         if con.execute(
-            "SELECT 1 FROM revisions WHERE commit_id = ? AND chunk_id = ? LIMIT 1",
+            "SELECT 1 FROM revisions WHERE commit_id = ? AND +chunk_id = ? LIMIT 1",
             (record.id, chunk),
         ).fetchone()
         is None

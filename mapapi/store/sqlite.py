@@ -199,14 +199,13 @@ class SqliteStore(SqliteChains, SqliteViews):
     def changed_since(
         self, time: int, *, table: str | None = None, chunk: ChunkId | None = None
     ) -> list[Revision]:
-        """Revisions written after `time`."""
-        where, args = sqlite_rows.scope(table, chunk)
-        where = where.replace("r.chunk_id", "+r.chunk_id")  # the time index: few are newer
+        """Revisions written after `time` (to `chunk`, or to `table`'s chunks): what
+        each chunk got since, through its time index, whatever other chunks got."""
+        sql, args = sqlite_rows.since(time, table, chunk)
         sql = (
-            f"SELECT {_REV_COLUMNS} FROM revisions r WHERE r.update_time > ?{where} "
-            "ORDER BY r.update_time, r.item_id"
+            f"SELECT {_REV_COLUMNS} FROM revisions r WHERE {sql} ORDER BY r.update_time, r.item_id"
         )
-        return [self._revision(row) for row in self._con().execute(sql, [time, *args])]
+        return [self._revision(row) for row in self._con().execute(sql, args)]
 
     def apply_commit(self, record: CommitRecord, revisions: Sequence[Revision]) -> None:
         """Write the record, its revisions and its chain links, in one transaction."""

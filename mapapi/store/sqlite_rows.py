@@ -167,3 +167,20 @@ def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
         clauses.append("r.chunk_id = ?")
         args.append(chunk)
     return "".join(f" AND {c}" for c in clauses), args
+
+
+def since(time: int, table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
+    """The SQL condition (after a WHERE) and its arguments that keep the revisions
+    `r` written after `time` to `chunk` (of `table`, if given), or else to the
+    chunks of `table`, each read through the (chunk, time) index; with neither,
+    every revision is read."""
+    if chunk is not None:
+        if table is None:
+            return "r.chunk_id = ? AND r.update_time > ?", [chunk, time]
+        return "r.chunk_id = ? AND r.update_time > ? AND +r.table_name = ?", [chunk, time, table]
+    if table is not None:
+        return (
+            "r.chunk_id IN (SELECT id FROM chunks WHERE table_name = ?) AND r.update_time > ?",
+            [table, time],
+        )
+    return "r.update_time > ?", [time]
