@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import random
 import sqlite3
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,6 +19,7 @@ import pytest
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 from mapapi.store import SqliteStore
+from tests.unit.query_plans import plans_of
 
 AUTHOR = PeerId.new()
 
@@ -55,19 +56,6 @@ def store(tmp_path: Path) -> Iterator[SqliteStore]:
     opened.close()
 
 
-def _plan(store: SqliteStore, read: Callable[[], object]) -> list[str]:
-    """The query plan of the one read of revisions `read()` makes (its real SQL)."""
-    statements: list[str] = []
-    con = store._con()
-    con.set_trace_callback(statements.append)
-    try:
-        read()
-    finally:
-        con.set_trace_callback(None)
-    (sql,) = [s for s in statements if s.startswith("SELECT") and "revisions r" in s]
-    return [row[-1] for row in con.execute("EXPLAIN QUERY PLAN " + sql)]
-
-
 def test_what_a_chunk_or_a_table_got_since_a_time_is_exactly_that(store: SqliteStore) -> None:
     written = _fill(store, random.Random(7), 200)
     for since in (0, 50, 120, 199, 200):
@@ -91,7 +79,7 @@ def test_a_chunk_and_a_tables_chunks_are_read_through_the_chunk_time_index(
         lambda: store.changed_since(10, table="t", chunk=chunk),
         lambda: store.changed_since(10, table="t"),
     ):
-        plan = _plan(store, read)
+        (plan,) = plans_of(store, read)
         assert plan[0] == "SEARCH r USING INDEX revisions_chunk_time (chunk_id=? AND update_time>?)"
 
 

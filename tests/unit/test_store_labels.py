@@ -6,7 +6,7 @@ whichever store wrote them."""
 from __future__ import annotations
 
 import random
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -17,6 +17,7 @@ from mapapi.store import SqliteStore
 from mapapi.store.labels import Labels, LabelSummary, RowLabel, summarise
 from mapapi.store.sqlite_labelled import LabelledSqliteStore
 from mapapi.store.sqlite_labels import FLAG
+from tests.unit.query_plans import plans_of
 
 AUTHOR = PeerId.new()
 TOY = "toy.Row"
@@ -257,27 +258,13 @@ def test_an_index_of_other_labels_or_other_tables_is_made_anew(tmp_path: Path) -
         other.close()
 
 
-def _plans(store: LabelledSqliteStore, read: Callable[[], object]) -> list[list[str]]:
-    """The query plans of the reads of revisions that `read()` makes (its real SQL)."""
-    statements: list[str] = []
-    con = store._con()
-    con.set_trace_callback(statements.append)
-    try:
-        read()
-    finally:
-        con.set_trace_callback(None)
-    reads = [sql for sql in statements if sql.startswith("SELECT") and "revisions r" in sql]
-    assert reads, statements
-    return [[row[-1] for row in con.execute("EXPLAIN QUERY PLAN " + sql)] for sql in reads]
-
-
 def test_a_read_of_one_label_seeks_its_rows_through_the_indexes(
     store: LabelledSqliteStore,
 ) -> None:
     toy = Toy(store)
     toy.commit(*((ItemId.new(), c, b"A:1:0,0,0") for c in toy.chunks))
 
-    (plan,) = _plans(store, lambda: store.scan_labelled(store.clock(), "A", table="t"))
+    (plan,) = plans_of(store, lambda: store.scan_labelled(store.clock(), "A", table="t"))
 
     assert any(s.startswith("SEARCH l USING PRIMARY KEY (label_set=?)") for s in plan), plan
     assert any(
@@ -292,7 +279,7 @@ def test_a_scan_of_one_chunk_reads_that_chunk_through_its_index(
     toy = Toy(store)
     toy.commit(*((ItemId.new(), c, b"A:1:0,0,0") for c in toy.chunks))
 
-    (plan,) = _plans(store, lambda: store.scan(store.clock(), table="t", chunk=toy.chunks[0]))
+    (plan,) = plans_of(store, lambda: store.scan(store.clock(), table="t", chunk=toy.chunks[0]))
 
     # not the table's index, which reads every chunk of the table (`ls TABLE --chunk`)
     assert plan[0].startswith("SEARCH r USING INDEX revisions_chunk (chunk_id=?)"), plan
