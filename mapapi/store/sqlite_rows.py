@@ -155,18 +155,15 @@ def write_revisions(
 
 def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     """The SQL condition (to append after a WHERE) and its arguments that keep the
-    revisions `r` of a table and a chunk (either may be None: any)."""
-    clauses: list[str] = []
-    args: list[object] = []
-    if table is not None:
-        # A chunk holds rows of one table: given both, the unary + keeps SQLite
-        # from reading the table's index (every chunk of it) instead of the chunk's.
-        clauses.append("+r.table_name = ?" if chunk is not None else "r.table_name = ?")
-        args.append(table)
+    revisions `r` of a table and a chunk (either may be None: any); a table's
+    rows are read chunk by chunk (`revisions_chunk`: no index is kept by table)."""
     if chunk is not None:
-        clauses.append("r.chunk_id = ?")
-        args.append(chunk)
-    return "".join(f" AND {c}" for c in clauses), args
+        if table is None:
+            return " AND r.chunk_id = ?", [chunk]
+        return " AND r.chunk_id = ? AND r.table_name = ?", [chunk, table]
+    if table is not None:
+        return " AND r.chunk_id IN (SELECT id FROM chunks WHERE table_name = ?)", [table]
+    return "", []
 
 
 def since(time: int, table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
@@ -177,7 +174,7 @@ def since(time: int, table: str | None, chunk: ChunkId | None) -> tuple[str, lis
     if chunk is not None:
         if table is None:
             return "r.chunk_id = ? AND r.update_time > ?", [chunk, time]
-        return "r.chunk_id = ? AND r.update_time > ? AND +r.table_name = ?", [chunk, time, table]
+        return "r.chunk_id = ? AND r.update_time > ? AND r.table_name = ?", [chunk, time, table]
     if table is not None:
         return (
             "r.chunk_id IN (SELECT id FROM chunks WHERE table_name = ?) AND r.update_time > ?",
