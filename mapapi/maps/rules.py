@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
 from mapapi.maps.errors import MissionRuleError
-from mapapi.maps.schema import EDGES, VERTICES, Edge, Vertex
+from mapapi.maps.schema import EDGES, VERTICES, Edge, Vertex, edge_ends
 
 if TYPE_CHECKING:
     from mapapi.core.change import Change
@@ -52,11 +52,7 @@ def edge_keys(data: bytes) -> tuple[Key, ...]:
     """The vertices an edge payload ends at: (from, to)."""
     if not data:
         return ()
-    edge = Edge.FromString(data)
-    return (
-        (edge.from_vertex.mission, edge.from_vertex.index),
-        (edge.to_vertex.mission, edge.to_vertex.index),
-    )
+    return edge_ends(Edge.FromString(data))
 
 
 class KeyIndex:

@@ -7,6 +7,7 @@ protobuf pool, so `TableDescriptor.named(..., "mapapi.v1.Vertex")` finds them.
 
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 from google.protobuf.message import Message
@@ -104,25 +105,69 @@ def vertex_to_pb(
     return Vertex(mission=mission, index=index, pose=pose_to_pb(pose), origin=origin_to_pb(origin))
 
 
+INFORMATION_SIZE = 21
+"""Values of a 6x6 information matrix's upper triangle."""
+
+SPARSE_AT_MOST = 16
+"""Non-zero entries up to which an edge stores its information sparsely (each
+costs a position byte more; 21 dense values cost 168 bytes)."""
+
+
 def edge_to_pb(mission: str, edge: GraphEdge) -> maps_pb2.Edge:
-    """One edge row, owned by `mission`."""
+    """One edge row, owned by `mission`: its ends in `mission` name no mission,
+    and an information matrix of few non-zero entries keeps only those."""
     message = Edge(mission=mission, relative=pose_to_pb(edge.relative), kind=_KIND[edge.kind])
-    message.from_vertex.mission, message.from_vertex.index = edge.source
-    message.to_vertex.mission, message.to_vertex.index = edge.target
-    message.information.extend(edge.information)
+    for ref, (end_mission, index) in (
+        (message.from_vertex, edge.source),
+        (message.to_vertex, edge.target),
+    ):
+        ref.index = index
+        if end_mission != mission:
+            ref.mission = end_mission
+    at = [k for k, v in enumerate(edge.information) if not _plain_zero(v)]
+    if len(edge.information) == INFORMATION_SIZE and 0 < len(at) <= SPARSE_AT_MOST:
+        message.information_at.extend(at)
+        message.information.extend(edge.information[k] for k in at)
+    else:
+        message.information.extend(edge.information)
     origin = origin_to_pb(edge.origin)
     if origin is not None:
         message.origin.CopyFrom(origin)
     return message
 
 
+def _plain_zero(value: float) -> bool:
+    """0.0 (not -0.0, which a sparse matrix would give back as 0.0)."""
+    return value == 0.0 and math.copysign(1.0, value) > 0
+
+
+def edge_ends(message: maps_pb2.Edge) -> tuple[tuple[str, int], tuple[str, int]]:
+    """The (mission, index) of an edge row's two ends."""
+    own = message.mission
+    return (
+        (message.from_vertex.mission or own, message.from_vertex.index),
+        (message.to_vertex.mission or own, message.to_vertex.index),
+    )
+
+
+def edge_information(message: maps_pb2.Edge) -> tuple[float, ...]:
+    """An edge row's 21 information values (however it stores them)."""
+    if not message.information_at:
+        return tuple(message.information)
+    full = [0.0] * INFORMATION_SIZE
+    for k, value in zip(message.information_at, message.information, strict=True):
+        full[k] = value
+    return tuple(full)
+
+
 def edge_from_pb(message: maps_pb2.Edge) -> GraphEdge:
     """A stored edge row as a `GraphEdge`."""
+    source, target = edge_ends(message)
     return GraphEdge(
-        (message.from_vertex.mission, message.from_vertex.index),
-        (message.to_vertex.mission, message.to_vertex.index),
+        source,
+        target,
         pose_from_pb(message.relative),
-        tuple(message.information),
+        edge_information(message),
         EdgeKind(message.kind),
         origin_from_pb(message.origin),
     )

@@ -119,7 +119,7 @@ class Origin(_message.Message):
     def __init__(self, line: _Optional[int] = ..., text: _Optional[str] = ...) -> None: ...
 
 class Edge(_message.Message):
-    __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind", "origin")
+    __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind", "origin", "information_at")
     class Kind(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
         __slots__ = ()
         KIND_UNSPECIFIED: _ClassVar[Edge.Kind]
@@ -137,6 +137,7 @@ class Edge(_message.Message):
     INFORMATION_FIELD_NUMBER: _ClassVar[int]
     KIND_FIELD_NUMBER: _ClassVar[int]
     ORIGIN_FIELD_NUMBER: _ClassVar[int]
+    INFORMATION_AT_FIELD_NUMBER: _ClassVar[int]
     mission: str
     from_vertex: VertexRef
     to_vertex: VertexRef
@@ -144,7 +145,8 @@ class Edge(_message.Message):
     information: _containers.RepeatedScalarFieldContainer[float]
     kind: Edge.Kind
     origin: Origin
-    def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ...) -> None: ...
+    information_at: _containers.RepeatedScalarFieldContainer[int]
+    def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ..., information_at: _Optional[_Iterable[int]] = ...) -> None: ...
 
 class Landmark(_message.Message):
     __slots__ = ("mission", "index", "position", "covariance")
