@@ -22,7 +22,7 @@ from pathlib import Path
 from mapapi.core import chain
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, PeerId
-from mapapi.store import raft_sql, sqlite_replica
+from mapapi.store import raft_sql, sqlite_replica, sqlite_rows
 from mapapi.store.base import Divergence
 
 CHAIN_SCHEMA = """
@@ -59,14 +59,11 @@ def unwritten(
 ) -> set[ChunkId]:
     """The chunks of `revisions` that hold none of `record`'s revisions yet (their
     part of the commit is new here, so their chains get its link)."""
+    parts = {(r.chunk_id, r.update_time) for r in revisions}
     return {
         chunk
-        for chunk in {r.chunk_id for r in revisions}
-        if con.execute(
-            "SELECT 1 FROM revisions WHERE commit_id = ? AND +chunk_id = ? LIMIT 1",
-            (record.id, chunk),
-        ).fetchone()
-        is None
+        for chunk, time in parts
+        if not sqlite_rows.of_commit(con, record.id, [(chunk, time)], columns="1")
     }
 
 

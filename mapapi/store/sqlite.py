@@ -238,12 +238,13 @@ class SqliteStore(SqliteChains, SqliteViews):
         return None if row is None else sqlite_rows.record(self.path, row)
 
     def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
-        """What one commit wrote."""
-        rows = self._con().execute(
-            f"SELECT {_REV_COLUMNS} FROM revisions WHERE commit_id = ? ORDER BY item_id",
-            (commit_id,),
-        )
-        return [self._revision(r) for r in rows]
+        """What one commit wrote (held here), by item."""
+        record = self.commit_record(commit_id)
+        if record is None:
+            return []
+        parts = [(chunk, record.time) for chunk in record.chunks]
+        rows = sqlite_rows.of_commit(self._con(), commit_id, parts)
+        return sorted((self._revision(r) for r in rows), key=lambda r: r.item_id)
 
     def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
         """Ids starting with `prefix`."""

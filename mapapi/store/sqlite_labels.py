@@ -85,9 +85,8 @@ def unwritten(
 ) -> list[Revision]:
     """The revisions of `record` the store does not hold yet (a commit may
     reach a holder twice, or one chunk's part at a time)."""
-    held = set(
-        con.execute("SELECT item_id, update_time FROM revisions WHERE commit_id = ?", (record.id,))
-    )
+    parts = {(r.chunk_id, r.update_time) for r in revisions}
+    held = set(sqlite_rows.of_commit(con, record.id, parts, columns="item_id, update_time"))
     return [r for r in revisions if (r.item_id, r.update_time) not in held]
 
 

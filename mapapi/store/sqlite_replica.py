@@ -130,11 +130,9 @@ def install(
         by_commit.setdefault(revision.commit_id, []).append(revision)
     for record in commits:
         sqlite_rows.write_commit(con, record, by_commit[record.id])
-    con.executemany(
-        "DELETE FROM commits WHERE id = ? AND NOT EXISTS "
-        "(SELECT 1 FROM revisions WHERE commit_id = ?)",
-        [(c, c) for c in had if c not in by_commit],
-    )
+    for commit_id in had:
+        if commit_id not in by_commit and not _holds_any(con, commit_id):
+            con.execute("DELETE FROM commits WHERE id = ?", (commit_id,))
     set_holders(con, chunk_id, peers)
 
 
@@ -143,3 +141,13 @@ def drop(con: sqlite3.Connection, chunk_id: ChunkId) -> None:
     con.execute("DELETE FROM revisions WHERE chunk_id = ?", (chunk_id,))
     con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lists them
     con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))
+
+
+def _holds_any(con: sqlite3.Connection, commit_id: CommitId) -> bool:
+    """Whether any revision of the commit is held here (in any of its chunks)."""
+    row = con.execute("SELECT time, chunks FROM commits WHERE id = ?", (commit_id,)).fetchone()
+    if row is None:
+        return False
+    time, chunks = row
+    parts = [(ChunkId(c), time) for c in chunks.split(",") if c]
+    return bool(sqlite_rows.of_commit(con, commit_id, parts, columns="1"))

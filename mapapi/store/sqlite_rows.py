@@ -4,8 +4,9 @@ a row back (a damaged one raises `CorruptRepoError`), and writing one commit."""
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 from mapapi._pb.mapapi.v1 import core_pb2
 from mapapi.core.errors import CorruptRepoError
@@ -156,7 +157,8 @@ def write_revisions(
 def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     """The SQL condition (to append after a WHERE) and its arguments that keep the
     revisions `r` of a table and a chunk (either may be None: any); a table's
-    rows are read chunk by chunk (`revisions_chunk`: no index is kept by table)."""
+    rows are read chunk by chunk (through `revisions_chunk_time`: no index is
+    kept by table)."""
     if chunk is not None:
         if table is None:
             return " AND r.chunk_id = ?", [chunk]
@@ -181,3 +183,18 @@ def since(time: int, table: str | None, chunk: ChunkId | None) -> tuple[str, lis
             [table, time],
         )
     return "r.update_time > ?", [time]
+
+
+def of_commit(
+    con: sqlite3.Connection,
+    commit_id: CommitId,
+    parts: Iterable[tuple[ChunkId, int]],
+    columns: str = REV_COLUMNS,
+) -> list[tuple[Any, ...]]:
+    """`columns` of the revisions commit `commit_id` wrote to each (chunk, time) of
+    `parts` (a commit's revisions in a chunk all have its time), read through the
+    (chunk, time) index: the store keeps no index by commit."""
+    sql = (
+        f"SELECT {columns} FROM revisions WHERE chunk_id = ? AND update_time = ? AND commit_id = ?"
+    )
+    return [row for chunk, time in parts for row in con.execute(sql, (chunk, time, commit_id))]

@@ -28,7 +28,9 @@ MISSIONS = ("a", "b")
 key_st = st.tuples(st.sampled_from(MISSIONS), st.integers(0, 5))
 # one step: (chunk 0-2, item slot 0-7, new keys or None for a removal), or a dropped chunk
 step_st = st.one_of(
-    st.tuples(st.integers(0, 2), st.integers(0, 7), st.none() | st.lists(key_st, min_size=1, max_size=2)),
+    st.tuples(
+        st.integers(0, 2), st.integers(0, 7), st.none() | st.lists(key_st, min_size=1, max_size=2)
+    ),
     st.tuples(st.just(-1), st.integers(0, 2), st.none()),
 )
 

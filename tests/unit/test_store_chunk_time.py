@@ -94,6 +94,8 @@ def test_an_older_store_gets_the_indexes_of_today_when_opened(tmp_path: Path) ->
         con.execute("DROP INDEX revisions_chunk_time")
         con.execute("CREATE INDEX revisions_time ON revisions (update_time)")
         con.execute("CREATE INDEX revisions_table ON revisions (table_name, item_id)")
+        con.execute("CREATE INDEX revisions_chunk ON revisions (chunk_id, item_id)")
+        con.execute("CREATE INDEX revisions_commit ON revisions (commit_id)")
     con.close()
 
     again = SqliteStore(path)
@@ -104,6 +106,8 @@ def test_an_older_store_gets_the_indexes_of_today_when_opened(tmp_path: Path) ->
         assert "revisions_chunk_time" in indexes
         assert "revisions_time" not in indexes
         assert "revisions_table" not in indexes  # a table's rows are read chunk by chunk
+        assert "revisions_chunk" not in indexes  # a chunk's rows: through the chunk-time index
+        assert "revisions_commit" not in indexes  # a commit's: its chunks at its time
         chunk = again.chunk_ids("u")[0]
         want = sorted((r.update_time, r.item_id) for r in written if r.chunk_id == chunk)
         assert [(r.update_time, r.item_id) for r in again.changed_since(0, chunk=chunk)] == want
