@@ -10,7 +10,9 @@ Graphs that list edges only get their vertices by chaining the odometry.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+import re
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
@@ -222,22 +224,87 @@ def write_g2o(graph: MissionGraph, out: TextIO, *, planar: bool | None = None) -
     return sum(1 for record in lines if record[1] == 1)
 
 
-def _vertex_line(index: int, pose: Pose, origin: Origin, planar: bool) -> str:
-    """The vertex's original text while it still says `index` and `pose`, else
-    the line its values give."""
-    read = _reread(origin, planar)
-    if read is not None and read[1][0] == index and _vertex_pose(*read, "", 0) == pose:
+def lean_origin(origin: Origin, tag: str, values: Sequence[float]) -> Origin:
+    """`origin` without its text when its number formatting (`Origin.digits`)
+    writes `values` after `tag` as exactly that text (the row then holds its
+    numbers once; an edge's text was 40 % of its row), else `origin`."""
+    digits = _digits(origin.text)
+    lean = Origin(origin.line, "", digits or b"")
+    if digits is None or _written(lean, tag, values) != origin.text:
+        return origin
+    return lean
+
+
+def lean_vertex(index: int, pose: Pose, origin: Origin, planar: bool) -> Origin:
+    """The vertex's `origin` for its row (`lean_origin`); `planar` as imported."""
+    return lean_origin(origin, *_vertex_values(index, pose, planar))
+
+
+def lean_edge(edge: GraphEdge, planar: bool) -> GraphEdge:
+    """The edge with the origin for its row (`lean_origin`); `planar` as imported."""
+    lean = lean_origin(edge.origin, *_edge_values(edge, planar))
+    return edge if lean is edge.origin else replace(edge, origin=lean)
+
+
+_NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
+
+
+def _digits(text: str) -> bytes | None:
+    """The decimals of each number after the tag of a g2o line; None when a
+    number is not plain fixed-point (an exponent, a sign, over 255 decimals)."""
+    _, *numbers = text.split(" ")
+    out = bytearray()
+    for number in numbers:
+        match = _NUMBER.fullmatch(number)
+        decimals = len(match.group(1) or "") if match else 256
+        if decimals > 255:
+            return None
+        out.append(decimals)
+    return bytes(out) if out else None
+
+
+def _written(origin: Origin, tag: str, values: Sequence[float]) -> str | None:
+    """The record's text as read: kept, or written again from `values` with its
+    formatting; None when there is neither (or the formatting is for other values)."""
+    if origin.text:
         return origin.text
+    if not origin.digits or len(origin.digits) != len(values):
+        return None
+    return " ".join([tag, *(f"{v:.{d}f}" for v, d in zip(values, origin.digits, strict=True))])
+
+
+def _vertex_values(index: int, pose: Pose, planar: bool) -> tuple[str, list[float]]:
     if planar:
-        return f"VERTEX_SE2 {index} {pose[0]!r} {pose[1]!r} {yaw(pose)!r}"
-    return f"VERTEX_SE3:QUAT {index} {_join(pose)}"
+        return "VERTEX_SE2", [index, pose[0], pose[1], yaw(pose)]
+    return "VERTEX_SE3:QUAT", [index, *pose]
+
+
+def _edge_values(edge: GraphEdge, planar: bool) -> tuple[str, list[float]]:
+    ends, rel = [edge.source[1], edge.target[1]], edge.relative
+    if planar:
+        info = project_information(edge.information)
+        return "EDGE_SE2", [*ends, rel[0], rel[1], yaw(rel), *info]
+    return "EDGE_SE3:QUAT", [*ends, *rel, *edge.information]
+
+
+def _vertex_line(index: int, pose: Pose, origin: Origin, planar: bool) -> str:
+    """The vertex's text as read while it still says `index` and `pose`, else
+    the line its values give."""
+    tag, values = _vertex_values(index, pose, planar)
+    text = _written(origin, tag, values)
+    read = _reread(text, planar)
+    if text and read is not None and read[1][0] == index and _vertex_pose(*read, "", 0) == pose:
+        return text
+    return _plain(tag, values)
 
 
 def _edge_line(edge: GraphEdge, planar: bool) -> str:
-    """The edge's original text while it still says what the edge holds, else
+    """The edge's text as read while it still says what the edge holds, else
     the line its values give."""
-    read = _reread(edge.origin, planar)
-    if read is not None:
+    tag, values = _edge_values(edge, planar)
+    text = _written(edge.origin, tag, values)
+    read = _reread(text, planar)
+    if text and read is not None:
         again = _edge(edge.source[0], *read, "", 0)
         if (again.source, again.target, again.relative, again.information) == (
             edge.source,
@@ -245,28 +312,24 @@ def _edge_line(edge: GraphEdge, planar: bool) -> str:
             edge.relative,
             edge.information,
         ):
-            return edge.origin.text
-    ends = f"{edge.source[1]} {edge.target[1]}"
-    rel = edge.relative
-    if planar:
-        info = _join(project_information(edge.information))
-        return f"EDGE_SE2 {ends} {rel[0]!r} {rel[1]!r} {yaw(rel)!r} {info}"
-    return f"EDGE_SE3:QUAT {ends} {_join(rel)} {_join(edge.information)}"
+            return text
+    return _plain(tag, values)
 
 
-def _reread(origin: Origin, planar: bool) -> tuple[str, list[float]] | None:
-    """(tag, values) of an original line of the dimension being written; None
-    when there is none (or it no longer parses, which a stored row never should)."""
-    if not origin.text:
+def _plain(tag: str, values: Sequence[float]) -> str:
+    """A record written from its values, floats in their shortest exact form."""
+    return " ".join([tag, *(repr(v) for v in values)])
+
+
+def _reread(text: str | None, planar: bool) -> tuple[str, list[float]] | None:
+    """(tag, values) of a record's text as read, of the dimension being written;
+    None when there is none (or it no longer parses, which a stored row never should)."""
+    if not text:
         return None
     try:
-        read = _record(origin.text, "", 0)
+        read = _record(text, "", 0)
     except (MapImportError, ValueError):
         return None
     if read is None or read[0].endswith("SE2") != planar:
         return None
     return read
-
-
-def _join(values: Iterable[float]) -> str:
-    return " ".join(repr(v) for v in values)

@@ -28,11 +28,15 @@ class Origin:
 
     Attributes:
         line: the record's line in its file (1-based), 0 when it had none.
-        text: the record's g2o text as read, without the line break ("" if none).
+        text: the record's g2o text as read, without the line break ("" if none,
+            or when `digits` give it back).
+        digits: the decimals of each number of that text, when the text is its
+            tag and the row's values written with them (`g2o.lean_origin`).
     """
 
     line: int = 0
     text: str = ""
+    digits: bytes = b""
 
 
 NO_ORIGIN = Origin()

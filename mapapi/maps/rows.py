@@ -9,6 +9,7 @@ from google.protobuf.message import Message
 
 from mapapi.maps.cloud import PointCloud, cloud_blocks
 from mapapi.maps.errors import MapImportError
+from mapapi.maps.g2o import lean_edge, lean_vertex
 from mapapi.maps.graph import NO_ORIGIN, MissionGraph
 from mapapi.maps.schema import (
     CLOUDS,
@@ -67,12 +68,15 @@ def build_cloud_rows(cloud: PointCloud) -> dict[str, list[Message]]:
 
 def vertex_rows(graph: MissionGraph, indices: Sequence[int]) -> list[Message]:
     """The rows of the vertices `indices`, with where the import read each."""
-    origins = graph.origins
+    origins, poses, planar = graph.origins, graph.vertices, graph.planar
     return [
-        vertex_to_pb(graph.name, i, graph.vertices[i], origins.get(i, NO_ORIGIN)) for i in indices
+        vertex_to_pb(
+            graph.name, i, poses[i], lean_vertex(i, poses[i], origins.get(i, NO_ORIGIN), planar)
+        )
+        for i in indices
     ]
 
 
 def edge_rows(graph: MissionGraph, positions: Sequence[int]) -> list[Message]:
     """The rows of the edges at `positions` of the graph's edge list."""
-    return [edge_to_pb(graph.name, graph.edges[n]) for n in positions]
+    return [edge_to_pb(graph.name, lean_edge(graph.edges[n], graph.planar)) for n in positions]

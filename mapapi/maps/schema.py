@@ -90,12 +90,14 @@ def mission_to_pb(source: MissionSource) -> maps_pb2.Mission:
 
 def origin_to_pb(origin: Origin) -> maps_pb2.Origin | None:
     """An `Origin` as its message; None for no origin (the field stays unset)."""
-    return None if origin == NO_ORIGIN else OriginPb(line=origin.line, text=origin.text)
+    if origin == NO_ORIGIN:
+        return None
+    return OriginPb(line=origin.line, text=origin.text, digits=origin.digits)
 
 
 def origin_from_pb(message: maps_pb2.Origin) -> Origin:
     """An `Origin` message as an `Origin`."""
-    return Origin(message.line, message.text)
+    return Origin(message.line, message.text, message.digits)
 
 
 def vertex_to_pb(

@@ -24,7 +24,7 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud, cloud_from_blocks
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import MissionGraph, Origin
+from mapapi.maps.graph import MissionGraph
 from mapapi.maps.labels import MAP_LABELS
 from mapapi.maps.schema import (
     CLOUDS,
@@ -33,6 +33,7 @@ from mapapi.maps.schema import (
     VERTICES,
     box_from_pb,
     edge_from_pb,
+    origin_from_pb,
     pose_from_pb,
 )
 from mapapi.maps.tiles import TileChunks
@@ -156,10 +157,10 @@ def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
     for line, (_, kind, message) in enumerate(records, 1):
         if kind == 0:
             graph.vertices[message.index] = pose_from_pb(message.pose)
-            graph.origins[message.index] = Origin(line, message.origin.text)
+            graph.origins[message.index] = replace(origin_from_pb(message.origin), line=line)
         else:
             edge = edge_from_pb(message)
-            graph.edges.append(replace(edge, origin=Origin(line, edge.origin.text)))
+            graph.edges.append(replace(edge, origin=replace(edge.origin, line=line)))
     return graph
 
 

@@ -23,6 +23,7 @@ from mapapi.maps import (
     read_g2o,
     read_kimera,
 )
+from mapapi.maps.g2o import lean_edge
 from mapapi.maps.se3 import IDENTITY
 from mapapi.maps.stored import mission_parts
 
@@ -78,7 +79,13 @@ class TestImportGraph:
         await import_graph(peer, graph)
         back = await load_graph(peer, "intel")
         assert back.vertices == graph.vertices
-        assert sorted(back.edges, key=repr) == sorted(graph.edges, key=repr)
+        # a row keeps a line's number formatting in place of its text where that
+        # writes it again (`lean_edge`): in intel.g2o, each line without a number
+        # in exponent form (2,468 of 2,512 edges)
+        lean = [lean_edge(e, graph.planar) for e in graph.edges]
+        for kept, read in zip(lean, graph.edges, strict=True):
+            assert bool(kept.origin.text) == ("e" in read.origin.text.partition(" ")[2])
+        assert sorted(back.edges, key=repr) == sorted(lean, key=repr)
         tx = peer.begin()
         (row,) = (await tx.items(MISSIONS)).values()
         box = graph.bbox()

@@ -102,29 +102,34 @@ async def test_comments_blank_and_fix_lines_give_the_normal_form(
 async def test_an_edited_record_is_written_from_its_values(
     ops: MapOperations, tmp_path: Path
 ) -> None:
-    """The original text is kept only while it still says what the record holds."""
+    """A record keeps its number formatting while that writes its values exactly;
+    else its values are written in their shortest exact form."""
     from mapapi.maps import VERTICES
     from mapapi.maps.schema import pose_to_pb
     from mapapi.maps.se3 import from_se2
 
     source = tmp_path / "small.g2o"
     source.write_text(
-        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1.50 0 0\nEDGE_SE2 0 1 1.5 0 0 1 0 0 1 0 1\n"
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1.50 0 0\nVERTEX_SE2 2 1.75 0 0\n"
+        "EDGE_SE2 0 1 1.5 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 0.25 0 0 1 0 0 1 0 1\n"
     )
     await ops.import_map(str(source))
     tx = ops.peer.begin()
-    (item,) = await tx.find(VERTICES, "index", 1)
-    moved = await tx.get(VERTICES, item)
-    assert moved is not None
-    moved.pose.CopyFrom(pose_to_pb(from_se2(2.0, 0.0, 0.0)))
-    tx.update(VERTICES, item, moved)
+    for index, x in ((1, 2.0), (2, 2.125)):  # 2.125 is not 2.12 or 2.13
+        (item,) = await tx.find(VERTICES, "index", index)
+        moved = await tx.get(VERTICES, item)
+        assert moved is not None
+        moved.pose.CopyFrom(pose_to_pb(from_se2(x, 0.0, 0.0)))
+        tx.update(VERTICES, item, moved)
     await tx.commit()
 
     await ops.export_map("small", str(tmp_path / "out.g2o"))
     assert (tmp_path / "out.g2o").read_text().splitlines() == [
         "VERTEX_SE2 0 0 0 0",
-        "VERTEX_SE2 1 2.0 0.0 0.0",
+        "VERTEX_SE2 1 2.00 0 0",
+        "VERTEX_SE2 2 2.125 0.0 0.0",
         "EDGE_SE2 0 1 1.5 0 0 1 0 0 1 0 1",
+        "EDGE_SE2 1 2 0.25 0 0 1 0 0 1 0 1",
     ]
 
 

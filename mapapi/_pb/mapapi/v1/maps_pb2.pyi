@@ -111,12 +111,14 @@ class Vertex(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., pose: _Optional[_Union[Pose3, _Mapping]] = ..., timestamp: _Optional[float] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ...) -> None: ...
 
 class Origin(_message.Message):
-    __slots__ = ("line", "text")
+    __slots__ = ("line", "text", "digits")
     LINE_FIELD_NUMBER: _ClassVar[int]
     TEXT_FIELD_NUMBER: _ClassVar[int]
+    DIGITS_FIELD_NUMBER: _ClassVar[int]
     line: int
     text: str
-    def __init__(self, line: _Optional[int] = ..., text: _Optional[str] = ...) -> None: ...
+    digits: bytes
+    def __init__(self, line: _Optional[int] = ..., text: _Optional[str] = ..., digits: _Optional[bytes] = ...) -> None: ...
 
 class Edge(_message.Message):
     __slots__ = ("mission", "from_vertex", "to_vertex", "relative", "information", "kind", "origin", "information_at")
