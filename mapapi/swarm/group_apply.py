@@ -12,7 +12,10 @@ So the Ready loop hands its committed entries and snapshots to `GroupApplier`:
 
 - work that is small, with nothing of the group queued, is applied at once on
   the loop (most commits: a hop to a thread would cost more than the write),
-  unless a worker holds SQLite's write lock: the loop never waits for it;
+  unless a worker holds SQLite's write lock: the loop never waits for it, or
+  the loop has already applied `INLINE_BUDGET_S` of work since it last turned
+  (a mission cut into 32 tiles is 64 small entries decided in one turn: applied
+  there one after another, they held the loop for a second);
 - anything else waits in the group's queue, and one task per group writes it in
   a worker thread (`store/offload.py`), in order, then answers the proposers and
   calls the applied hook on the loop.
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,6 +55,10 @@ log = logging.getLogger(__name__)
 HEAVY_BYTES = 64 * 1024
 """Entry and snapshot bytes from which work leaves the loop (about 500 map rows:
 some 10 ms of decoding and writing on the 2-core machine)."""
+
+INLINE_BUDGET_S = 0.02
+"""Seconds of small work applied on the loop before the rest of what arrives in
+the same turn of the loop goes to worker threads too."""
 
 AppliedHook = Callable[[ChunkId, Applied], None]
 """Called on the loop with what each applied NORMAL entry did, in log order."""
@@ -127,6 +135,7 @@ class GroupApplier:
         # better (a small decision writes every row its transaction prepared)
         self.weigh: Callable[[ChunkId, Entry], int] = lambda chunk, entry: len(entry.data)
         self._tasks: dict[ChunkId, asyncio.Task[None]] = {}
+        self._inline_s = 0.0  # spent on the loop since it last turned
 
     def idle(self, chunk: ChunkId) -> bool:
         """Whether nothing of the chunk's group waits to be applied."""
@@ -165,7 +174,9 @@ class GroupApplier:
 
     def _add(self, group: GroupState, work: Work) -> None:
         chunk = group.chunk
-        if self.idle(chunk) and self._light(chunk, work):  # raises: the caller halts
+        inline = self._inline_s < INLINE_BUDGET_S and self.idle(chunk)
+        if inline and self._light(chunk, work):  # raises: the caller halts
+            started = time.perf_counter()
             try:
                 with without_waiting(self._store):
                     done = self._write(chunk, work)
@@ -174,10 +185,21 @@ class GroupApplier:
             else:
                 self._finish(group, work, done)
                 return
+            finally:
+                self._spent(time.perf_counter() - started)
         self._queues.setdefault(chunk, deque()).append(work)
         if chunk not in self._tasks:
             loop = asyncio.get_running_loop()
             self._tasks[chunk] = loop.create_task(self._drain(group), name=f"apply {chunk.short}")
+
+    def _spent(self, seconds: float) -> None:
+        """Count time spent applying on the loop, until the loop turns."""
+        if not self._inline_s:
+            asyncio.get_running_loop().call_soon(self._turned)
+        self._inline_s += seconds
+
+    def _turned(self) -> None:
+        self._inline_s = 0.0
 
     def _light(self, chunk: ChunkId, work: Work) -> bool:
         """Whether `work` is applied on the loop: entries that weigh little (a

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
 from pathlib import Path
 from typing import ClassVar
 
@@ -117,3 +118,45 @@ async def test_a_ready_waits_for_the_write_lock_in_a_worker_not_on_the_loop(worl
     assert kept is not None
     assert [e.data for e in kept.entries][-2:] == [BIG, b"after"]
     assert not node.groups.disk.busy(A)
+
+
+COST = 0.015  # seconds one "cost" entry takes to apply (of INLINE_BUDGET_S = 0.02)
+
+
+class Costly(Node):
+    """A peer whose apply of a small "cost" entry takes `COST` seconds of the
+    thread it runs in, and notes whether that was the loop's."""
+
+    on_loop: ClassVar[list[bool]] = []
+
+    def _apply(self, chunk: ChunkId, entry: Entry) -> Applied:
+        if entry.data.startswith(b"cost"):
+            Costly.on_loop.append(threading.current_thread() is threading.main_thread())
+            end = time.perf_counter() + COST
+            while time.perf_counter() < end:  # work, as decoding and writing rows is
+                pass
+        return super()._apply(chunk, entry)
+
+
+async def test_small_entries_of_many_chunks_leave_the_loop_once_it_spent_its_budget(
+    world: World,
+) -> None:
+    """A mission cut into tiles is many small entries decided at once: applied on
+    the loop one after another, they held it for a second. The loop applies them
+    until it spent `INLINE_BUDGET_S` in one turn; the rest go to workers."""
+    Costly.on_loop.clear()
+    node = await world.add(kind=Costly)
+    chunks = [ChunkId.new() for _ in range(6)]
+    for chunk in chunks:
+        node.groups.found(chunk, [node.id])
+    for chunk in chunks:
+        await leader_of([node], chunk)
+
+    # each proposal's task takes its first step in the same turn of the loop
+    proposals = [asyncio.ensure_future(node.groups.propose(c, b"cost")) for c in chunks]
+    await asyncio.gather(*proposals)
+
+    assert len(Costly.on_loop) == len(chunks)
+    assert Costly.on_loop[0]  # the first applies at once, on the loop
+    assert 1 <= sum(Costly.on_loop) <= 2  # then the budget is spent: workers take the rest
+    assert all(node.applied[c] == [b"cost"] for c in chunks)
