@@ -32,7 +32,7 @@ from mapapi.maps.graph import GraphEdge, MissionGraph
 from mapapi.maps.schema import TilePb, box_from_pb, box_to_pb
 from mapapi.maps.se3 import Pose
 
-TILE_VERTICES = 2048
+TILE_VERTICES = 768
 """Most vertices in one tile: a tile's rows (about twice that, with its edges)
 travel as one snapshot, so this bounds what a load holds in memory at once."""
 
@@ -41,7 +41,7 @@ TILE_EXTENT = 64.0
 default spatial grid's cell (`mapapi.lookup.spatial`), so such a tile is registered
 in at most 4 cells of a plane."""
 
-TILE_MIN_VERTICES = 512
+TILE_MIN_VERTICES = 192
 """Fewest vertices a tile is cut down to for its extent: each chunk is a Raft group
 of its own, and a sparse robot path of 150 poses over 500 m cut every 64 m made
 tiles of 20 poses."""

@@ -39,7 +39,7 @@ class TestImport:
             "points": 0,
         }
         assert set(mission["chunks"]) == {"missions"}  # the graph is in tiles
-        assert [t["vertex_count"] for t in mission["tiles"]] == [1_728]
+        assert [t["vertex_count"] for t in mission["tiles"]] == [432] * 4
         assert sum(t["edge_count"] for t in mission["tiles"]) == 2_512
         held = {c["id"]: c["items"] for c in mapctl.json("chunk", "list")["chunks"]}
         for tile in mission["tiles"]:

@@ -58,14 +58,14 @@ class TestImportGraph:
             2_512,
         )
         assert await counts(peer) == {MISSIONS: 1, VERTICES: 1_728, EDGES: 2_512}
-        # 1,728 vertices in 26 m: one tile (at most TILE_VERTICES, TILE_EXTENT wide)
-        assert len(result.tiles) == 1
+        # 1,728 vertices in 26 m: 4 tiles (at most TILE_VERTICES each, TILE_EXTENT wide)
+        assert len(result.tiles) == 4
         assert {t: len(peer.chunks(t)) for t in (MISSIONS, VERTICES, EDGES)} == {
             MISSIONS: 1,
-            VERTICES: 1,
-            EDGES: 1,
+            VERTICES: 4,
+            EDGES: 4,
         }
-        assert [t.vertex_count for t in result.tiles] == [1_728]
+        assert [t.vertex_count for t in result.tiles] == [432] * 4
         assert sum(t.edge_count for t in result.tiles) == 2_512
         held = {c.id: c.items for c in peer.chunks()}
         for tile in result.tiles:
@@ -123,11 +123,11 @@ class TestImportGraph:
 
     async def test_a_box_needs_the_mission_row_and_the_tiles_it_overlaps(self) -> None:
         peer = Peer.in_memory()
-        garage = await import_graph(peer, read_g2o(GARAGE))  # 1,661 poses over 270 m: 4 tiles
+        garage = await import_graph(peer, read_g2o(GARAGE))  # 1,661 poses over 270 m: 12 tiles
         first, *others = garage.tiles
         (parts,) = (await mission_parts(peer, ["parking-garage"])).values()
 
-        assert len(others) == 3
+        assert len(others) == 11
         assert parts.in_box(first.bbox) >= {garage.chunks[MISSIONS], *first.chunks()}
         inside = BBox(*first.bbox.mins, *first.bbox.mins)  # a corner of the first tile only
         assert not any(t.bbox.overlaps(inside) for t in others)

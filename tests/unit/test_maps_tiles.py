@@ -92,11 +92,11 @@ def test_the_tiles_a_box_overlaps_hold_every_edge_among_its_vertices(
 
 def test_a_dense_graph_is_cut_by_count_and_a_long_path_by_extent() -> None:
     intel = tile_graph(read_g2o(SAMPLES / "pose_graphs" / "intel.g2o"))  # 1,728 poses in 26 m
-    assert [len(t.vertices) for t in intel] == [1_728]  # within both bounds: one tile
+    assert [len(t.vertices) for t in intel] == [432] * 4  # by count: at most TILE_VERTICES
     dense = MissionGraph("dense", "r", "dense/map")
     for index in range(5_000):  # 5,000 poses in 20 m
         dense.vertices[index] = (index % 100 * 0.2, index // 100 * 0.4, 0.0, *IDENTITY[3:])
-    assert [len(t.vertices) for t in tile_graph(dense)] == [1_250] * 4
+    assert [len(t.vertices) for t in tile_graph(dense)] == [625] * 8
 
     def path(poses: int, step: float) -> list[float]:
         graph = MissionGraph("path", "r", "path/map")
@@ -104,9 +104,9 @@ def test_a_dense_graph_is_cut_by_count_and_a_long_path_by_extent() -> None:
             graph.vertices[index] = (index * step, 0.0, 0.0, *IDENTITY[3:])
         return [t.bbox.xmax - t.bbox.xmin for t in tile_graph(graph)]
 
-    assert path(2_000, 0.25) == [124.75] * 4  # 500 poses each: not cut below TILE_MIN_VERTICES
-    assert path(4_000, 0.25) == [124.75] * 8
-    assert path(500, 1.0) == [499.0]  # too few poses to cut for extent
+    assert path(2_000, 0.25) == [62.25] * 8  # by count, then by extent: 250 poses in 62 m
+    assert path(600, 0.5) == [74.5] * 4  # 150 poses each: not cut below TILE_MIN_VERTICES
+    assert path(150, 1.0) == [149.0]  # too few poses to cut for extent
 
 
 def test_a_graph_without_vertices_has_no_tiles() -> None:
