@@ -251,7 +251,7 @@ _NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
 
 def _digits(text: str) -> bytes | None:
     """The decimals of each number after the tag of a g2o line; None when a
-    number is not plain fixed-point (an exponent, a sign, over 255 decimals)."""
+    number is not plain fixed-point (an exponent, a plus sign, over 255 decimals)."""
     _, *numbers = text.split(" ")
     out = bytearray()
     for number in numbers:
