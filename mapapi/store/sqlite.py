@@ -233,17 +233,12 @@ class SqliteStore(SqliteChains, SqliteViews):
 
     def commit_record(self, commit_id: CommitId) -> CommitRecord | None:
         """One record."""
-        sql = f"SELECT {_COMMIT_COLUMNS} FROM commits WHERE id = ?"
-        row = self._con().execute(sql, (commit_id,)).fetchone()
-        return None if row is None else sqlite_rows.record(self.path, row)
+        return sqlite_rows.commit_record(self.path, self._con(), commit_id)
 
     def commit_revisions(self, commit_id: CommitId) -> list[Revision]:
         """What one commit wrote (held here), by item."""
         record = self.commit_record(commit_id)
-        if record is None:
-            return []
-        parts = [(chunk, record.time) for chunk in record.chunks]
-        rows = sqlite_rows.of_commit(self._con(), commit_id, parts)
+        rows = [] if record is None else sqlite_rows.of_record(self._con(), record)
         return sorted((self._revision(r) for r in rows), key=lambda r: r.item_id)
 
     def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
@@ -323,7 +318,8 @@ class SqliteStore(SqliteChains, SqliteViews):
         con = self._con()
         with self._write(con):
             self.mark.before_write(con)
-            sqlite_replica.install(con, chunk_id, table, type_name, revisions, commits, holders)
+            replica = (table, type_name, revisions, commits, holders)
+            sqlite_replica.install(self.path, con, chunk_id, *replica)
             if links is None:
                 chain_sql.replace(con, chunk_id, list(base), len(base))
                 chain_sql.rebuild(con, self.path, chunk_id)

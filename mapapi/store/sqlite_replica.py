@@ -96,6 +96,7 @@ def chunk_commits(path: Path, con: sqlite3.Connection, chunk_id: ChunkId) -> lis
 
 
 def install(
+    path: Path,
     con: sqlite3.Connection,
     chunk_id: ChunkId,
     table: str,
@@ -131,7 +132,7 @@ def install(
     for record in commits:
         sqlite_rows.write_commit(con, record, by_commit[record.id])
     for commit_id in had:
-        if commit_id not in by_commit and not _holds_any(con, commit_id):
+        if commit_id not in by_commit and not _holds_any(path, con, commit_id):
             con.execute("DELETE FROM commits WHERE id = ?", (commit_id,))
     set_holders(con, chunk_id, peers)
 
@@ -143,11 +144,7 @@ def drop(con: sqlite3.Connection, chunk_id: ChunkId) -> None:
     con.execute("DELETE FROM chunks WHERE id = ?", (chunk_id,))
 
 
-def _holds_any(con: sqlite3.Connection, commit_id: CommitId) -> bool:
+def _holds_any(path: Path, con: sqlite3.Connection, commit_id: CommitId) -> bool:
     """Whether any revision of the commit is held here (in any of its chunks)."""
-    row = con.execute("SELECT time, chunks FROM commits WHERE id = ?", (commit_id,)).fetchone()
-    if row is None:
-        return False
-    time, chunks = row
-    parts = [(ChunkId(c), time) for c in chunks.split(",") if c]
-    return bool(sqlite_rows.of_commit(con, commit_id, parts, columns="1"))
+    record = sqlite_rows.commit_record(path, con, commit_id)
+    return record is not None and bool(sqlite_rows.of_record(con, record, columns="1"))

@@ -198,3 +198,16 @@ def of_commit(
         f"SELECT {columns} FROM revisions WHERE chunk_id = ? AND update_time = ? AND commit_id = ?"
     )
     return [row for chunk, time in parts for row in con.execute(sql, (chunk, time, commit_id))]
+
+
+def commit_record(path: Path, con: sqlite3.Connection, commit_id: CommitId) -> CommitRecord | None:
+    """The record of a commit (None: unknown here), from the store at `path`."""
+    row = con.execute(f"SELECT {COMMIT_COLUMNS} FROM commits WHERE id = ?", (commit_id,)).fetchone()
+    return None if row is None else record(path, row)
+
+
+def of_record(
+    con: sqlite3.Connection, commit: CommitRecord, columns: str = REV_COLUMNS
+) -> list[tuple[Any, ...]]:
+    """`of_commit` for every chunk the commit names, at its time."""
+    return of_commit(con, commit.id, [(c, commit.time) for c in commit.chunks], columns)
