@@ -73,9 +73,7 @@ class Target:
     def pools(self) -> Pools:
         """The values "valid" messages draw from: T's real ids, keys and addresses."""
         with store_check.read_only(self.store) as con:
-            items = [
-                bytes.fromhex(r[0]) for r in con.execute("SELECT DISTINCT item_id FROM revisions")
-            ]
+            items = [bytes(r[0]) for r in con.execute("SELECT DISTINCT item_id FROM revisions")]
             commits = [bytes.fromhex(r[0]) for r in con.execute("SELECT id FROM commits")]
             clock = max(r[0] or 0 for r in con.execute("SELECT max(time) FROM commits"))
         chunks = [ChunkId(c) for c in self.chunks.values()]

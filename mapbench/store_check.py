@@ -22,19 +22,16 @@ Snapshot = dict[str, list[tuple[Any, ...]]]
 
 _INVARIANTS = {
     "revisions of a chunk this store does not know": """
-        SELECT count(*) FROM revisions r LEFT JOIN chunks c ON c.id = r.chunk_id
-        WHERE c.id IS NULL""",
-    "revisions filed under another table than their chunk's": """
-        SELECT count(*) FROM revisions r JOIN chunks c ON c.id = r.chunk_id
-        WHERE c.table_name != r.table_name""",
+        SELECT count(*) FROM revisions r LEFT JOIN chunks c ON c.no = r.chunk_no
+        WHERE c.no IS NULL""",
     "revisions of a commit with no record": """
-        SELECT count(*) FROM revisions r LEFT JOIN commits m ON m.id = r.commit_id
-        WHERE m.id IS NULL""",
+        SELECT count(*) FROM revisions r LEFT JOIN commits m ON m.no = r.commit_no
+        WHERE m.no IS NULL""",
     "items that live in more than one chunk": """
         SELECT count(*) FROM (SELECT item_id FROM revisions GROUP BY item_id
-                              HAVING count(DISTINCT chunk_id) > 1)""",
+                              HAVING count(DISTINCT chunk_no) > 1)""",
     "revisions written at another time than their commit's": """
-        SELECT count(*) FROM revisions r JOIN commits m ON m.id = r.commit_id
+        SELECT count(*) FROM revisions r JOIN commits m ON m.no = r.commit_no
         WHERE m.time != r.update_time""",
 }
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import sqlite3
 from dataclasses import dataclass
 
-from mapapi.store import chain_sql
+from mapapi.store import chain_sql, sqlite_rows
 
 FLOOR = "gc_horizon"
 """The `meta` key of `floor`."""
@@ -40,9 +40,9 @@ class Compaction:
     chunks: int  # whose chains gained a compacted part
 
 
-_DOOMED = """
+_DOOMED = f"""
 INSERT INTO gc_doomed
-SELECT r.item_id, r.update_time, r.chunk_id, r.commit_id, LENGTH(r.data) FROM revisions r
+SELECT r.item_id, r.update_time, c.id, m.id, LENGTH(r.data) FROM {sqlite_rows.REV_FROM}
 WHERE r.update_time < :horizon
   AND r.update_time < (SELECT MAX(x.update_time) FROM revisions x
                        WHERE x.item_id = r.item_id AND x.update_time <= :horizon)
@@ -56,7 +56,7 @@ def compact(con: sqlite3.Connection, horizon: int, keep: int | None = None) -> C
     `keep` newest), with their label-index rows, and extend the touched chunks'
     compacted chain parts."""
     con.execute(
-        "CREATE TEMP TABLE IF NOT EXISTS gc_doomed (item_id TEXT, update_time INTEGER, "
+        "CREATE TEMP TABLE IF NOT EXISTS gc_doomed (item_id BLOB, update_time INTEGER, "
         "chunk_id TEXT, commit_id TEXT, size INTEGER, PRIMARY KEY (item_id, update_time)) "
         "WITHOUT ROWID"
     )

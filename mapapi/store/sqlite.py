@@ -26,6 +26,7 @@ from mapapi.store.sqlite_chain import SqliteChains
 from mapapi.store.sqlite_connection import Connections
 from mapapi.store.sqlite_rows import COMMIT_COLUMNS as _COMMIT_COLUMNS
 from mapapi.store.sqlite_rows import REV_COLUMNS as _REV_COLUMNS
+from mapapi.store.sqlite_rows import REV_FROM as _REV_FROM
 from mapapi.store.sqlite_views import SqliteViews
 
 
@@ -122,7 +123,7 @@ class SqliteStore(SqliteChains, SqliteViews):
         sql = """
             SELECT c.id, c.table_name, COUNT(r.item_id), COALESCE(SUM(LENGTH(r.data)), 0)
             FROM chunks c
-            LEFT JOIN revisions r ON r.chunk_id = c.id AND r.removed = 0
+            LEFT JOIN revisions r ON r.chunk_no = c.no AND r.removed = 0
              AND r.update_time = (SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)
             WHERE (? IS NULL OR c.table_name = ?) AND (? IS NULL OR c.id = ?)
             GROUP BY c.id ORDER BY c.id"""
@@ -150,9 +151,9 @@ class SqliteStore(SqliteChains, SqliteViews):
         row = (
             self._con()
             .execute(
-                f"SELECT {_REV_COLUMNS} FROM revisions WHERE item_id = ? AND update_time <= ? "
-                "ORDER BY update_time DESC LIMIT 1",
-                (item_id, time),
+                f"SELECT {_REV_COLUMNS} FROM {_REV_FROM} WHERE r.item_id = ? "
+                "AND r.update_time <= ? ORDER BY r.update_time DESC LIMIT 1",
+                (sqlite_rows.item_key(item_id), time),
             )
             .fetchone()
         )
@@ -161,8 +162,8 @@ class SqliteStore(SqliteChains, SqliteViews):
     def history(self, item_id: ItemId) -> list[Revision]:
         """All revisions of an item."""
         rows = self._con().execute(
-            f"SELECT {_REV_COLUMNS} FROM revisions WHERE item_id = ? ORDER BY update_time",
-            (item_id,),
+            f"SELECT {_REV_COLUMNS} FROM {_REV_FROM} WHERE r.item_id = ? ORDER BY r.update_time",
+            (sqlite_rows.item_key(item_id),),
         )
         return [self._revision(r) for r in rows]
 
@@ -172,7 +173,7 @@ class SqliteStore(SqliteChains, SqliteViews):
         """Items visible at `time`."""
         where, args = sqlite_rows.scope(table, chunk)
         sql = (
-            f"SELECT {_REV_COLUMNS.replace('item_id', 'r.item_id', 1)} FROM revisions r "
+            f"SELECT {_REV_COLUMNS} FROM {_REV_FROM} "
             "WHERE r.update_time = (SELECT MAX(update_time) FROM revisions "
             "  WHERE item_id = r.item_id AND update_time <= ?) "
             f"AND r.removed = 0{where} ORDER BY r.item_id"
@@ -184,10 +185,10 @@ class SqliteStore(SqliteChains, SqliteViews):
         out: dict[ItemId, Revision] = {}
         con = self._con()
         for start in range(0, len(item_ids), 500):
-            batch = list(item_ids[start : start + 500])
+            batch = [sqlite_rows.item_key(i) for i in item_ids[start : start + 500]]
             marks = ",".join("?" * len(batch))
             sql = (
-                f"SELECT {_REV_COLUMNS.replace('item_id', 'r.item_id', 1)} FROM revisions r "
+                f"SELECT {_REV_COLUMNS} FROM {_REV_FROM} "
                 f"WHERE r.item_id IN ({marks}) AND r.update_time = "
                 "(SELECT MAX(update_time) FROM revisions WHERE item_id = r.item_id)"
             )
@@ -203,7 +204,7 @@ class SqliteStore(SqliteChains, SqliteViews):
         each chunk got since, through its time index, whatever other chunks got."""
         sql, args = sqlite_rows.since(time, table, chunk)
         sql = (
-            f"SELECT {_REV_COLUMNS} FROM revisions r WHERE {sql} ORDER BY r.update_time, r.item_id"
+            f"SELECT {_REV_COLUMNS} FROM {_REV_FROM} WHERE {sql} ORDER BY r.update_time, r.item_id"
         )
         return [self._revision(row) for row in self._con().execute(sql, args)]
 
@@ -243,16 +244,12 @@ class SqliteStore(SqliteChains, SqliteViews):
 
     def resolve_prefix(self, kind: IdKind, prefix: str) -> list[str]:
         """Ids starting with `prefix`."""
-        table, column = {
-            "item": ("revisions", "item_id"),
-            "chunk": ("chunks", "id"),
-            "commit": ("commits", "id"),
-        }[kind]
+        if kind == "item":
+            return sqlite_rows.item_prefix(self._con(), prefix)
+        table = {"chunk": "chunks", "commit": "commits"}[kind]
         hi = prefix + "g"  # every hex id with this prefix sorts below prefix + 'g'
         rows = self._con().execute(
-            f"SELECT DISTINCT {column} FROM {table} WHERE {column} >= ? AND {column} < ? "
-            f"ORDER BY {column} LIMIT 2",
-            (prefix, hi),
+            f"SELECT id FROM {table} WHERE id >= ? AND id < ? ORDER BY id LIMIT 2", (prefix, hi)
         )
         return [r[0] for r in rows]
 
@@ -287,7 +284,11 @@ class SqliteStore(SqliteChains, SqliteViews):
         """The chunk an item belongs to, if this store has it."""
         row = (
             self._con()
-            .execute("SELECT chunk_id FROM revisions WHERE item_id = ? LIMIT 1", (item_id,))
+            .execute(
+                "SELECT c.id FROM revisions r JOIN chunks c ON c.no = r.chunk_no "
+                "WHERE r.item_id = ? LIMIT 1",
+                (sqlite_rows.item_key(item_id),),
+            )
             .fetchone()
         )
         return None if row is None else ChunkId(row[0])

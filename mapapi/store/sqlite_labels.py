@@ -38,7 +38,7 @@ CREATE TABLE IF NOT EXISTS label_sets (
     UNIQUE (label, chunk_id));
 CREATE INDEX IF NOT EXISTS label_sets_chunk ON label_sets (chunk_id);
 CREATE TABLE IF NOT EXISTS labelled (
-    label_set INTEGER NOT NULL, item_id TEXT NOT NULL, update_time INTEGER NOT NULL,
+    label_set INTEGER NOT NULL, item_id BLOB NOT NULL, update_time INTEGER NOT NULL,
     PRIMARY KEY (label_set, item_id, update_time)) WITHOUT ROWID;
 """
 
@@ -49,7 +49,6 @@ FLAG = "labels"
 """The `meta` key holding the signature of the labels the index is complete for."""
 
 _BOX = "xmin, ymin, zmin, xmax, ymax, zmax"
-_REV = ", ".join(f"r.{c.strip()}" for c in sqlite_rows.REV_COLUMNS.split(","))
 
 
 def ready(con: sqlite3.Connection) -> bool:
@@ -86,8 +85,8 @@ def unwritten(
     """The revisions of `record` the store does not hold yet (a commit may
     reach a holder twice, or one chunk's part at a time)."""
     parts = {(r.chunk_id, r.update_time) for r in revisions}
-    held = set(sqlite_rows.of_commit(con, record.id, parts, columns="item_id, update_time"))
-    return [r for r in revisions if (r.item_id, r.update_time) not in held]
+    held = set(sqlite_rows.of_commit(con, record.id, parts, columns="r.item_id, r.update_time"))
+    return [r for r in revisions if (sqlite_rows.item_key(r.item_id), r.update_time) not in held]
 
 
 def committed(
@@ -120,7 +119,7 @@ def committed(
     ids = _set_ids(con, {key for key, _ in rows} | set(recount))
     con.executemany(
         "INSERT OR IGNORE INTO labelled VALUES (?, ?, ?)",
-        sorted((ids[key], r.item_id, r.update_time) for key, r in rows),
+        sorted((ids[key], sqlite_rows.item_key(r.item_id), r.update_time) for key, r in rows),
     )
     for key, added in grown.items():
         if key not in recount:
@@ -154,7 +153,10 @@ def installed(
     ids = _set_ids(con, {(label, chunk) for label, _ in rows})
     con.executemany(
         "INSERT OR IGNORE INTO labelled VALUES (?, ?, ?)",
-        sorted((ids[(label, chunk)], r.item_id, r.update_time) for label, r in rows),
+        sorted(
+            (ids[(label, chunk)], sqlite_rows.item_key(r.item_id), r.update_time)
+            for label, r in rows
+        ),
     )
     for label, tally in tallies.items():
         _set(con, ids[(label, chunk)], tally)
@@ -205,8 +207,9 @@ def scan_sql(sets: int) -> str:
     the set ids, then the time."""
     marks = ",".join("?" * sets)
     return (
-        f"SELECT {_REV} FROM labelled l "
+        f"SELECT {sqlite_rows.REV_COLUMNS} FROM labelled l "
         "JOIN revisions r ON r.item_id = l.item_id AND r.update_time = l.update_time "
+        f"{sqlite_rows.REV_JOINS} "
         f"WHERE l.label_set IN ({marks}) AND r.removed = 0 AND r.update_time = "
         "(SELECT MAX(update_time) FROM revisions WHERE item_id = l.item_id AND update_time <= ?) "
         "ORDER BY l.item_id"
@@ -242,7 +245,7 @@ def _live_before(con: sqlite3.Connection, revision: Revision) -> bytes | None:
     row = con.execute(
         "SELECT data, removed FROM revisions WHERE item_id = ? AND update_time < ? "
         "ORDER BY update_time DESC LIMIT 1",
-        (revision.item_id, revision.update_time),
+        (sqlite_rows.item_key(revision.item_id), revision.update_time),
     ).fetchone()
     return None if row is None or row[1] else bytes(row[0])
 

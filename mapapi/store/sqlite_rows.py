@@ -9,23 +9,63 @@ from pathlib import Path
 from typing import Any
 
 from mapapi._pb.mapapi.v1 import core_pb2
-from mapapi.core.errors import CorruptRepoError
+from mapapi.core.errors import CorruptRepoError, UsageError
 from mapapi.core.history import CommitRecord, Revision
 from mapapi.core.ids import ChunkId, CommitId, ItemId, PeerId
 
 COMMIT_COLUMNS = "id, time, author, message, chunks, author_name, view"
 
+# A revision row names its chunk and its commit by their numbers in this store
+# (`chunks.no`, `commits.no`) and its item by its 16 bytes; its table and author
+# are its chunk's and its commit's. That is 40 bytes less per row than four
+# 32-digit ids and a table name, and 16 less per row of the chunk-time index
+# (format 2; `sqlite_migrate` brings a format-1 store to it). Reads join the
+# two small tables back, by their integer keys.
+REV_JOINS = "JOIN chunks c ON c.no = r.chunk_no JOIN commits m ON m.no = r.commit_no"
+"""The joins that give revisions `r` the rest of `REV_COLUMNS`."""
+
+REV_FROM = f"revisions r {REV_JOINS}"
+"""The FROM clause `REV_COLUMNS` are read from (the revisions as `r`)."""
+
 REV_COLUMNS = (
-    "item_id, table_name, chunk_id, data, insert_time, update_time, removed, author, commit_id"
+    "r.item_id, c.table_name, c.id, r.data, r.insert_time, r.update_time, r.removed, m.author, m.id"
 )
+"""A revision's columns in `REV_FROM`, in the order `revision` reads them."""
+
+CHUNK_NO = "(SELECT no FROM chunks WHERE id = ?)"
+"""SQL for the number of the chunk whose id is the parameter."""
+
+COMMIT_NO = "(SELECT no FROM commits WHERE id = ?)"
+"""SQL for the number of the commit whose id is the parameter."""
+
+
+def item_key(item_id: str) -> bytes:
+    """An item id as the revisions table keys it (its 16 bytes)."""
+    return bytes.fromhex(item_id)
+
+
+def item_prefix(con: sqlite3.Connection, prefix: str) -> list[str]:
+    """The ids of (at most two) items whose id starts with the hex digits `prefix`."""
+    if len(prefix) > 32:
+        return []
+    try:  # the smallest and the largest 16 bytes whose hex starts with it
+        lo, hi = (bytes.fromhex(prefix.ljust(32, pad)) for pad in "0f")
+    except ValueError:
+        return []
+    rows = con.execute(
+        "SELECT DISTINCT item_id FROM revisions WHERE item_id BETWEEN ? AND ? "
+        "ORDER BY item_id LIMIT 2",
+        (lo, hi),
+    )
+    return [bytes(r[0]).hex() for r in rows]
 
 
 def revision(path: Path, row: sqlite3.Row | tuple) -> Revision:
     """The revision in a row of `REV_COLUMNS` read from the store at `path`."""
-    item_id, table, chunk, data, inserted, updated, removed, author, commit = row
+    item, table, chunk, data, inserted, updated, removed, author, commit = row
     try:
         return Revision(
-            ItemId(item_id),
+            ItemId.from_bytes(item),
             table,
             ChunkId(chunk),
             bytes(data),
@@ -42,12 +82,14 @@ def revision(path: Path, row: sqlite3.Row | tuple) -> Revision:
 def revision_pb(path: Path, row: tuple) -> core_pb2.Revision:
     """The revision in a row of `REV_COLUMNS` as its wire message (`revision`, then
     `codec.revision_to_pb`, in one step; a damaged row raises `CorruptRepoError`)."""
-    item_id, table, chunk, data, inserted, updated, removed, author, commit = row
+    item, table, chunk, data, inserted, updated, removed, author, commit = row
     try:
-        if not len(item_id) == len(chunk) == len(author) == len(commit) == 32:
+        if not (isinstance(item, bytes) and len(item) == 16):
+            raise ValueError("an item id is not 16 bytes")
+        if not len(chunk) == len(author) == len(commit) == 32:
             raise ValueError("an id is not 32 hex digits")
         return core_pb2.Revision(
-            item_id=bytes.fromhex(item_id),
+            item_id=item,
             table=table,
             chunk_id=bytes.fromhex(chunk),
             data=data,
@@ -125,24 +167,27 @@ def write_record(con: sqlite3.Connection, record: CommitRecord) -> bool:
 def write_revisions(
     con: sqlite3.Connection, record: CommitRecord, revisions: Sequence[Revision]
 ) -> None:
-    """Write a commit's revisions (those here already stay) and advance the clock."""
+    """Write a commit's revisions (those here already stay) and advance the clock.
+
+    Raises:
+        UsageError: a revision is not the record's (another commit id or author),
+            or names a chunk this store does not have.
+    """
+    numbers = _numbers(con, record, revisions)
     # In primary-key order: random ids inserted as they come touch pages all
     # over the table's B-tree; sorted, a large commit writes in half the time.
     con.executemany(
-        "INSERT OR IGNORE INTO revisions (item_id, update_time, table_name, chunk_id, "
-        "data, insert_time, removed, author, commit_id) "
-        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+        "INSERT OR IGNORE INTO revisions (item_id, update_time, chunk_no, data, insert_time, "
+        "removed, commit_no) VALUES (?, ?, ?, ?, ?, ?, ?)",
         sorted(
             (
-                r.item_id,
+                item_key(r.item_id),
                 r.update_time,
-                r.table,
-                r.chunk_id,
+                numbers[r.chunk_id],
                 r.data,
                 r.insert_time,
                 int(r.removed),
-                r.author,
-                r.commit_id,
+                numbers[None],
             )
             for r in revisions
         ),
@@ -154,6 +199,33 @@ def write_revisions(
     con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lacks these
 
 
+def _numbers(
+    con: sqlite3.Connection, record: CommitRecord, revisions: Sequence[Revision]
+) -> dict[ChunkId | None, int]:
+    """The store's numbers of the revisions' chunks, and of the record (key None),
+    checking that every revision is the record's: a row keeps its commit's author."""
+    numbers: dict[ChunkId | None, int] = {}
+    if not revisions:
+        return numbers
+    row = con.execute("SELECT no, author FROM commits WHERE id = ?", (record.id,)).fetchone()
+    if row is None or row[1] != record.author:
+        raise UsageError(f"commit {record.id.short} is not recorded here as it is sent")
+    numbers[None] = int(row[0])
+    for r in revisions:
+        if r.commit_id != record.id or r.author != record.author:
+            raise UsageError(
+                f"a revision of item {r.item_id.short} names commit {r.commit_id.short} by "
+                f"{r.author.short}, sent as part of commit {record.id.short} by "
+                f"{record.author.short}"
+            )
+        if r.chunk_id not in numbers:
+            found = con.execute("SELECT no FROM chunks WHERE id = ?", (r.chunk_id,)).fetchone()
+            if found is None:
+                raise UsageError(f"no chunk {r.chunk_id} here for item {r.item_id.short}")
+            numbers[r.chunk_id] = int(found[0])
+    return numbers
+
+
 def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     """The SQL condition (to append after a WHERE) and its arguments that keep the
     revisions `r` of a table and a chunk (either may be None: any); a table's
@@ -161,10 +233,10 @@ def scope(table: str | None, chunk: ChunkId | None) -> tuple[str, list[object]]:
     kept by table)."""
     if chunk is not None:
         if table is None:
-            return " AND r.chunk_id = ?", [chunk]
-        return " AND r.chunk_id = ? AND r.table_name = ?", [chunk, table]
+            return f" AND r.chunk_no = {CHUNK_NO}", [chunk]
+        return f" AND r.chunk_no = {CHUNK_NO} AND c.table_name = ?", [chunk, table]
     if table is not None:
-        return " AND r.chunk_id IN (SELECT id FROM chunks WHERE table_name = ?)", [table]
+        return " AND r.chunk_no IN (SELECT no FROM chunks WHERE table_name = ?)", [table]
     return "", []
 
 
@@ -174,12 +246,13 @@ def since(time: int, table: str | None, chunk: ChunkId | None) -> tuple[str, lis
     chunks of `table`, each read through the (chunk, time) index; with neither,
     every revision is read."""
     if chunk is not None:
+        where = f"r.chunk_no = {CHUNK_NO} AND r.update_time > ?"
         if table is None:
-            return "r.chunk_id = ? AND r.update_time > ?", [chunk, time]
-        return "r.chunk_id = ? AND r.update_time > ? AND r.table_name = ?", [chunk, time, table]
+            return where, [chunk, time]
+        return where + " AND c.table_name = ?", [chunk, time, table]
     if table is not None:
         return (
-            "r.chunk_id IN (SELECT id FROM chunks WHERE table_name = ?) AND r.update_time > ?",
+            "r.chunk_no IN (SELECT no FROM chunks WHERE table_name = ?) AND r.update_time > ?",
             [table, time],
         )
     return "r.update_time > ?", [time]
@@ -191,11 +264,12 @@ def of_commit(
     parts: Iterable[tuple[ChunkId, int]],
     columns: str = REV_COLUMNS,
 ) -> list[tuple[Any, ...]]:
-    """`columns` of the revisions commit `commit_id` wrote to each (chunk, time) of
-    `parts` (a commit's revisions in a chunk all have its time), read through the
-    (chunk, time) index: the store keeps no index by commit."""
+    """`columns` (of `REV_FROM`) of the revisions commit `commit_id` wrote to each
+    (chunk, time) of `parts` (a commit's revisions in a chunk all have its time),
+    read through the (chunk, time) index: the store keeps no index by commit."""
     sql = (
-        f"SELECT {columns} FROM revisions WHERE chunk_id = ? AND update_time = ? AND commit_id = ?"
+        f"SELECT {columns} FROM {REV_FROM} WHERE r.chunk_no = {CHUNK_NO} "
+        f"AND r.update_time = ? AND r.commit_no = {COMMIT_NO}"
     )
     return [row for chunk, time in parts for row in con.execute(sql, (chunk, time, commit_id))]
 

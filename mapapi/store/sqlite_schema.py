@@ -8,30 +8,35 @@ from __future__ import annotations
 
 import sqlite3
 
-from mapapi.store import chain_sql, raft_sql
+from mapapi.store import chain_sql, raft_sql, sqlite_migrate
 from mapapi.store.file_check import check_schema
 from mapapi.store.mark import APPLIED
 from mapapi.store.sqlite_connection import Connections
 
 FORMAT = "mapapi-store"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = sqlite_migrate.TO_VERSION
 
+# Format 2 (see `sqlite_rows` and `sqlite_migrate`). Only the indexes reads use:
+# a chunk's rows, what it got since a time, and a commit's rows (its chunks at
+# its time) are all read through (chunk, time); a table's rows are its chunks'.
+# Each index more cost 7-13 % of the store and a random-order B-tree insert per
+# revision, and a time index over the whole table made the mission rules' "what
+# did chunk C get since T" read every revision since T of every chunk.
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS tables (
     name TEXT PRIMARY KEY, type_name TEXT NOT NULL, replication INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS chunks (
-    id TEXT PRIMARY KEY, table_name TEXT NOT NULL REFERENCES tables(name),
-    replication INTEGER NOT NULL DEFAULT 0);
+    no INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE,
+    table_name TEXT NOT NULL REFERENCES tables(name), replication INTEGER NOT NULL DEFAULT 0);
 CREATE TABLE IF NOT EXISTS revisions (
-    item_id TEXT NOT NULL, update_time INTEGER NOT NULL, table_name TEXT NOT NULL,
-    chunk_id TEXT NOT NULL, data BLOB NOT NULL, insert_time INTEGER NOT NULL,
-    removed INTEGER NOT NULL, author TEXT NOT NULL, commit_id TEXT NOT NULL,
-    PRIMARY KEY (item_id, update_time)) WITHOUT ROWID;
-CREATE INDEX IF NOT EXISTS revisions_chunk_time ON revisions (chunk_id, update_time);
+    item_id BLOB NOT NULL, update_time INTEGER NOT NULL, chunk_no INTEGER NOT NULL,
+    data BLOB NOT NULL, insert_time INTEGER NOT NULL, removed INTEGER NOT NULL,
+    commit_no INTEGER NOT NULL, PRIMARY KEY (item_id, update_time)) WITHOUT ROWID;
+CREATE INDEX IF NOT EXISTS revisions_chunk_time ON revisions (chunk_no, update_time);
 CREATE TABLE IF NOT EXISTS commits (
-    id TEXT PRIMARY KEY, time INTEGER NOT NULL, author TEXT NOT NULL,
-    message TEXT NOT NULL, chunks TEXT NOT NULL,
+    no INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE, time INTEGER NOT NULL,
+    author TEXT NOT NULL, message TEXT NOT NULL, chunks TEXT NOT NULL,
     author_name TEXT NOT NULL DEFAULT '', view TEXT NOT NULL DEFAULT '');
 CREATE INDEX IF NOT EXISTS commits_time ON commits (time);
 CREATE TABLE IF NOT EXISTS views (name TEXT PRIMARY KEY, body BLOB NOT NULL);
@@ -40,7 +45,7 @@ CREATE TABLE IF NOT EXISTS holders (
     PRIMARY KEY (chunk_id, peer_id)) WITHOUT ROWID;
 """
 
-# Columns added since format 1, with how to add them to an older store (its
+# Columns added to format 1, with how to add them to an older store (its
 # records then name no author and no view: `log` falls back to other names).
 _ADDED_COLUMNS = {
     "tables": (("replication", "INTEGER NOT NULL DEFAULT 0"),),  # 0: the swarm's default
@@ -50,25 +55,6 @@ _ADDED_COLUMNS = {
         ("view", "TEXT NOT NULL DEFAULT ''"),
     ),
 }
-
-
-# Indexes replaced or dropped since format 1: (old, new or None, its definition).
-# - A time index over the whole table made "what did chunk C get since T" read
-#   every revision since T of every chunk; the mission rules ask it of each chunk
-#   held at each commit, and an import into a repository of 10 missions took 9x
-#   as long as into an empty one. A (chunk, time) index answers it.
-# - A table's rows are its chunks' rows; an index by table cost 7 % of the store
-#   and a random-order B-tree insert per revision.
-# - The (chunk, time) index finds a chunk's rows as well as a (chunk, item) one
-#   did (13 % of the store); reads that want them by item sort one chunk's rows.
-# - A commit's revisions in a chunk all have its time: the (chunk, time) index
-#   finds them from the commit record, and an index by commit cost 13 % more.
-_REPLACED_INDEXES = (
-    ("revisions_time", "revisions_chunk_time", "revisions (chunk_id, update_time)"),
-    ("revisions_table", None, None),
-    ("revisions_chunk", None, None),
-    ("revisions_commit", None, None),
-)
 
 
 def setup(db: Connections, create: bool) -> None:
@@ -93,7 +79,8 @@ def setup(db: Connections, create: bool) -> None:
                 (FORMAT, str(SCHEMA_VERSION), APPLIED, chain_sql.LINKED),
             )
     _add_columns(db, con)
-    _replace_indexes(db, con)
+    if {"chunks", "commits", "revisions"} <= (_tables_if_ours(con) or set()):
+        sqlite_migrate.to_format_2(db, con, db.path)  # else check_schema refuses it
     _add_tables(db, con, raft_sql.RAFT_SCHEMA, raft_sql.RAFT_TABLES)
     _add_tables(db, con, chain_sql.CHAIN_SCHEMA, chain_sql.CHAIN_TABLES)
     _link_commits(db, con)
@@ -145,21 +132,6 @@ def _add_columns(db: Connections, con: sqlite3.Connection) -> None:
             with db.write(con):
                 for name, definition in missing:
                     con.execute(f"ALTER TABLE {table} ADD COLUMN {name} {definition}")
-
-
-def _replace_indexes(db: Connections, con: sqlite3.Connection) -> None:
-    """Give an older store the indexes of `_REPLACED_INDEXES` in place of the old
-    ones, and drop the ones dropped (once: building an index reads every revision)."""
-    tables = _tables_if_ours(con)
-    if tables is None or "revisions" not in tables:
-        return  # check_schema refuses it
-    have = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'index'")}
-    for old, new, definition in _REPLACED_INDEXES:
-        if old in have or (new is not None and new not in have):
-            with db.write(con):
-                if new is not None:
-                    con.execute(f"CREATE INDEX IF NOT EXISTS {new} ON {definition}")
-                con.execute(f"DROP INDEX IF EXISTS {old}")
 
 
 def _tables_if_ours(con: sqlite3.Connection) -> set[str] | None:

@@ -33,7 +33,7 @@ def test_a_payload_that_no_longer_parses_fails_with_exit_1(points: Mapctl) -> No
     con.close()
     outcome = points.main("fsck")
     assert outcome.code == 1
-    assert item in outcome.out
+    assert item.hex() in outcome.out
 
 
 def test_a_chain_that_no_longer_matches_is_reported(tmp_path: Path) -> None:

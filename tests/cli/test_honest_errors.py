@@ -41,11 +41,10 @@ class TestCorruptPayload:
         item = points.insert({"x": 1})
         commit = points.commit("one")["commit"]
         with sqlite3.connect(_store(points.repo)) as con:
-            (data,) = con.execute(
-                "SELECT data FROM revisions WHERE item_id = ?", (item,)
-            ).fetchone()
+            key = bytes.fromhex(item)  # the store keys an item by its 16 bytes
+            (data,) = con.execute("SELECT data FROM revisions WHERE item_id = ?", (key,)).fetchone()
             flipped = b"\xff" + bytes(data)[1:]  # field 31, wire type 7: no protobuf parses it
-            con.execute("UPDATE revisions SET data = ? WHERE item_id = ?", (flipped, item))
+            con.execute("UPDATE revisions SET data = ? WHERE item_id = ?", (flipped, key))
         for args in (("ls", "pts"), ("get", "pts", item), ("show", commit), ("log", "pts", item)):
             done = points.main(*args)
             assert done.code == 1, (args, done)

@@ -66,7 +66,9 @@ def _poison(repo: Path, item: str) -> None:
     poisoned.update({"x": math.nan, "y": math.inf, "z": -math.inf, "ok": 1})
     data = poisoned.SerializeToString(deterministic=True)
     with sqlite3.connect(repo / ".mapapi" / "store.sqlite") as con:
-        changed = con.execute("UPDATE revisions SET data = ? WHERE item_id = ?", (data, item))
+        changed = con.execute(
+            "UPDATE revisions SET data = ? WHERE item_id = ?", (data, bytes.fromhex(item))
+        )
         assert changed.rowcount >= 1
 
 

@@ -74,7 +74,7 @@ DAMAGE: dict[str, tuple[Callable[[Path], None], str]] = {
     ),
     "a newer format": (
         lambda r: _sql(r / STORE, "UPDATE meta SET value = '99' WHERE key = 'version'"),
-        "was written in store format 99; this mapapi reads formats up to 1: upgrade mapapi",
+        "was written in store format 99; this mapapi reads formats up to 2: upgrade mapapi",
     ),
     "an unknown format": (
         lambda r: _sql(r / STORE, "UPDATE meta SET value = 'x' WHERE key = 'version'"),

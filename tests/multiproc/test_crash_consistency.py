@@ -102,18 +102,18 @@ def check_store(path: Path, acked: set[str], context: str) -> None:
         assert con.execute("PRAGMA integrity_check").fetchall() == [("ok",)], context
         partial = con.execute(
             "SELECT c.id, COUNT(r.item_id) FROM commits c "
-            "LEFT JOIN revisions r ON r.commit_id = c.id "
+            "LEFT JOIN revisions r ON r.commit_no = c.no "
             "GROUP BY c.id HAVING COUNT(r.item_id) != ?",
             (ITEMS,),
         ).fetchall()
         assert partial == [], f"{context}: commits with missing revisions"
         orphans = con.execute(
-            "SELECT COUNT(*) FROM revisions r LEFT JOIN commits c ON c.id = r.commit_id "
-            "WHERE c.id IS NULL"
+            "SELECT COUNT(*) FROM revisions r LEFT JOIN commits c ON c.no = r.commit_no "
+            "WHERE c.no IS NULL"
         ).fetchone()
         assert orphans == (0,), f"{context}: revisions without a commit record"
         mistimed = con.execute(
-            "SELECT COUNT(*) FROM revisions r JOIN commits c ON c.id = r.commit_id "
+            "SELECT COUNT(*) FROM revisions r JOIN commits c ON c.no = r.commit_no "
             "WHERE r.update_time != c.time"
         ).fetchone()
         assert mistimed == (0,), context

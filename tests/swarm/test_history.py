@@ -122,7 +122,7 @@ async def test_a_replica_that_no_longer_matches_its_chain_is_not_sent(
     con.execute(
         "UPDATE revisions SET data = ? WHERE item_id = ? AND update_time = "
         "(SELECT MIN(update_time) FROM revisions WHERE item_id = ?)",
-        (Counter(name="c", value=4).SerializeToString(), item, item),
+        (Counter(name="c", value=4).SerializeToString(), item.to_bytes(), item.to_bytes()),
     )
     con.commit()
     con.close()

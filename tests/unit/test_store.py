@@ -188,13 +188,20 @@ class TestReplicas:
         assert [revision_from_pb(m) for m in wire] == store.chunk_revisions(writer.c1)
         assert [m.removed for m in wire].count(True) == 1
 
-    def test_a_damaged_id_in_a_chunks_history_is_named(self, tmp_path: Path) -> None:
+    @pytest.mark.parametrize(
+        "damage",
+        [
+            "UPDATE revisions SET item_id = x'abcd'",  # an item id is 16 bytes
+            "UPDATE commits SET author = 'abc'",  # a row's author is its commit's
+        ],
+    )
+    def test_a_damaged_id_in_a_chunks_history_is_named(self, tmp_path: Path, damage: str) -> None:
         store = SqliteStore(tmp_path / "s.sqlite", create=True)
         writer = Writer(store)
         item = ItemId.new()
         writer.commit(1, (item, writer.c1, b"x"))
         con = sqlite3.connect(tmp_path / "s.sqlite")
-        con.execute("UPDATE revisions SET author = 'abc' WHERE item_id = ?", (item,))
+        con.execute(damage)
         con.commit()
         con.close()
         try:
