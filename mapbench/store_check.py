@@ -46,10 +46,18 @@ def read_only(path: Path) -> Iterator[sqlite3.Connection]:
         con.close()
 
 
+# Revisions with their chunk's and commit's ids, not the store's numbers for them.
+_SELECT = {
+    "revisions": "SELECT r.item_id, r.update_time, c.id, r.data, r.insert_time, r.removed, m.id "
+    "FROM revisions r LEFT JOIN chunks c ON c.no = r.chunk_no "
+    "LEFT JOIN commits m ON m.no = r.commit_no"
+}
+
+
 def snapshot(path: Path) -> Snapshot:
     """Every row of the store's tables that hold map data, sorted."""
     with read_only(path) as con:
-        return {t: sorted(con.execute(f"SELECT * FROM {t}")) for t in DATA_TABLES}
+        return {t: sorted(con.execute(_SELECT.get(t, f"SELECT * FROM {t}"))) for t in DATA_TABLES}
 
 
 def problems(path: Path) -> list[str]:
@@ -85,8 +93,8 @@ def unexplained(
     for table in ("tables", "chunks"):
         if before[table] != after[table]:
             found.append(f"the {table} table changed")
-    # holders (chunk_id, peer_id); revisions (item_id, update_time, table, chunk_id, ...)
-    for table, column in (("holders", 0), ("revisions", 3)):
+    # holders (chunk_id, peer_id); revisions (item_id, update_time, chunk_id, ...)
+    for table, column in (("holders", 0), ("revisions", 2)):
         free = set(may_change) | (set(regrouped) if table == "holders" else set())
         old = [r for r in before[table] if r[column] not in free]
         new = [r for r in after[table] if r[column] not in free]
