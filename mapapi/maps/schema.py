@@ -101,10 +101,17 @@ def origin_from_pb(message: maps_pb2.Origin) -> Origin:
 
 
 def vertex_to_pb(
-    mission: str, index: int, pose: Pose, origin: Origin = NO_ORIGIN
+    mission: str, index: int, pose: Pose, origin: Origin = NO_ORIGIN, timestamp: float = 0.0
 ) -> maps_pb2.Vertex:
-    """One vertex row, with where an import read it."""
-    return Vertex(mission=mission, index=index, pose=pose_to_pb(pose), origin=origin_to_pb(origin))
+    """One vertex row, with where an import read it and when the pose was taken
+    (seconds; 0: unknown)."""
+    return Vertex(
+        mission=mission,
+        index=index,
+        pose=pose_to_pb(pose),
+        timestamp=timestamp,
+        origin=origin_to_pb(origin),
+    )
 
 
 INFORMATION_SIZE = 21

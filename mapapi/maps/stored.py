@@ -158,6 +158,8 @@ def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
         if kind == 0:
             graph.vertices[message.index] = pose_from_pb(message.pose)
             graph.origins[message.index] = replace(origin_from_pb(message.origin), line=line)
+            if message.timestamp:
+                graph.timestamps[message.index] = message.timestamp
         else:
             edge = edge_from_pb(message)
             graph.edges.append(replace(edge, origin=replace(edge.origin, line=line)))

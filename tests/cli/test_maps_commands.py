@@ -159,6 +159,16 @@ class TestMissionsAndExport:
         assert "112586 points" in mapctl("export", "room_scan1", "-o", str(out))
         assert out.read_bytes().startswith(b"ply\n")
 
+    def test_a_trajectory_by_extension_or_format(self, intel: Mapctl, tmp_path: Path) -> None:
+        said = intel("export", "intel", "-o", str(tmp_path / "intel.tum"))
+        assert "1728 poses (no timestamps: the index is the time)" in said
+        outcome = intel.main("export", "intel", "-o", str(tmp_path / "intel.txt"))
+        assert outcome.code == EXIT_USAGE
+        assert "pass --format tum or --format kitti" in outcome.err
+        info = intel.json("export", "intel", "-o", str(tmp_path / "intel.txt"), "--format", "kitti")
+        assert (info["format"], info["poses"], info["time"]) == ("kitti", 1_728, "index")
+        assert len((tmp_path / "intel.txt").read_text().splitlines()[0].split()) == 12
+
     def test_export_of_an_unknown_mission_exits_2(self, intel: Mapctl, tmp_path: Path) -> None:
         outcome = intel.main("export", "nope", "-o", str(tmp_path / "x.g2o"))
         assert outcome.code == EXIT_USAGE
