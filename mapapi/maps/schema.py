@@ -38,6 +38,7 @@ OriginPb = maps_pb2.Origin
 # table name -> payload class, for the tables a graph (or a cloud) import writes
 GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
 CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
+LASER_TABLES: dict[str, type[Message]] = {**GRAPH_TABLES, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {
     **GRAPH_TABLES,
     LANDMARKS: Landmark,

@@ -70,8 +70,9 @@ class MissionInfo:
 
     @property
     def kind(self) -> str:
-        """What the mission holds: "cloud" when it has points, else "graph"."""
-        return "cloud" if self.points else "graph"
+        """What the mission holds: "cloud" when it has points and no poses, else
+        "graph" (a laser mission has both: its trajectory is its graph)."""
+        return "cloud" if self.points and not self.vertices else "graph"
 
 
 @asynccontextmanager

@@ -9,7 +9,7 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "ply", "pcd")  # mapapi.maps.source.FORMATS, kept import-free
+FORMATS = ("g2o", "kimera-csv", "ply", "pcd", "carmen")  # mapapi.maps.source.FORMATS
 EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd")  # mapapi.maps.jobs.EXPORT_FORMATS
 
 
@@ -20,9 +20,14 @@ def _bbox_text(box: list[float] | None) -> str:
 def _size_text(mission: dict[str, Any]) -> str:
     if mission["vertices"] is None:
         return "?"  # held elsewhere: only its box is known here
-    if mission["points"]:
-        return f"{mission['points']} points"
-    return f"{mission['vertices']} v + {mission['edges']} e"
+    graph = f"{mission['vertices']} v + {mission['edges']} e"
+    if mission["points"]:  # a cloud, or a laser mission's scans
+        return (
+            f"{graph}, {mission['points']} points"
+            if mission["vertices"]
+            else f"{mission['points']} points"
+        )
+    return graph
 
 
 def _holders_text(holders: list[dict[str, Any]]) -> str:
@@ -58,7 +63,8 @@ def import_map(
     voxel: float | None,
     as_json: bool,
 ) -> None:
-    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud.
+    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud,
+    CARMEN laser log (.clf, .clf.bz2).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
