@@ -28,7 +28,7 @@ $(DEMO_STAMP): pyproject.toml | $(PY)
 
 # The test set holds the demo set, so it marks both as installed.
 $(TEST_STAMP): pyproject.toml | $(PY)
-	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy), matplotlib, open3d-cpu for point clouds and gtsam for registration"
+	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy, evo), matplotlib, open3d-cpu for point clouds and gtsam for registration"
 	@$(PY) -m pip install --quiet -e '.[dev,plot,pointcloud,registration]'
 	@bash scripts/ensure-syslibs.sh
 	@touch $@ $(DEMO_STAMP)

@@ -7,37 +7,26 @@ Intel Research Lab log (`radish_laser_logs/intel.clf.bz2`, CC-BY-3.0) has
 that pose and one odometry edge between consecutive scans (their relative
 pose) make a real 2D graph of the same order, 13,631 poses and 13,630 edges.
 It has no loop closures, which a read of the stored graph does not care
-about. The information matrix of every edge is the same (`INFORMATION`).
+about. The information matrix of every edge is the same
+(`mapapi.maps.carmen.INFORMATION`). `mapctl import LOG.clf.bz2` stores the same
+trajectory with its scans; this writes the graph alone, as a g2o file.
 
     python -m mapbench.carmen LOG.clf.bz2 OUT.g2o
 """
 
 from __future__ import annotations
 
-import bz2
-import math
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
-INFORMATION = (400.0, 0.0, 0.0, 400.0, 0.0, 3283.0)
-"""The upper triangle of every edge's 3x3 information matrix: 5 cm and 1 degree
-standard deviation."""
+from mapapi.maps.carmen import INFORMATION, Scan, open_log, read_records, relative_se2
 
 
-def scan_poses(path: Path) -> Iterator[tuple[float, float, float]]:
+def scan_poses(path: Path) -> list[tuple[float, float, float]]:
     """The odometry pose (x, y, theta) of every FLASER scan of a CARMEN log
-    (plain or bzip2), in order."""
-    opener = bz2.open if path.suffix == ".bz2" else open
-    with opener(path, "rt", encoding="ascii") as log:
-        for line in log:
-            fields = line.split()
-            if len(fields) < 2 or fields[0] != "FLASER":
-                continue
-            n = int(fields[1])
-            # FLASER n r1..rn x y theta odom_x odom_y odom_theta ...
-            x, y, theta = (float(v) for v in fields[n + 5 : n + 8])
-            yield x, y, theta
+    (plain or bzip2), in order (`mapapi.maps.carmen` reads it)."""
+    with open_log(path) as log:
+        return [r.odometry for r in read_records(log, str(path)) if isinstance(r, Scan)]
 
 
 def write_graph(poses: list[tuple[float, float, float]], out: Path) -> None:
@@ -47,10 +36,7 @@ def write_graph(poses: list[tuple[float, float, float]], out: Path) -> None:
         for i, (x, y, theta) in enumerate(poses):
             g2o.write(f"VERTEX_SE2 {i} {x:.6f} {y:.6f} {theta:.6f}\n")
         for i in range(len(poses) - 1):
-            (x0, y0, t0), (x1, y1, t1) = poses[i], poses[i + 1]
-            c, s = math.cos(t0), math.sin(t0)
-            dx, dy = c * (x1 - x0) + s * (y1 - y0), -s * (x1 - x0) + c * (y1 - y0)
-            dt = math.atan2(math.sin(t1 - t0), math.cos(t1 - t0))
+            dx, dy, dt = relative_se2(poses[i], poses[i + 1])
             g2o.write(f"EDGE_SE2 {i} {i + 1} {dx:.6f} {dy:.6f} {dt:.6f} {information}\n")
 
 
@@ -59,7 +45,7 @@ def main(argv: list[str]) -> int:
     if len(argv) != 2:
         print(__doc__.strip().splitlines()[-1].strip(), file=sys.stderr)
         return 2
-    poses = list(scan_poses(Path(argv[0])))
+    poses = scan_poses(Path(argv[0]))
     write_graph(poses, Path(argv[1]))
     print(f"{len(poses)} poses, {max(len(poses) - 1, 0)} edges -> {argv[1]}")
     return 0

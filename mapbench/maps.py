@@ -47,27 +47,30 @@ def measure_import(
     store: str = "sqlite",
     samples: Path = SAMPLES,
     directory: str | Path | None = None,
+    path: Path | None = None,
 ) -> dict[str, Any]:
-    """Import `dataset` `runs` times, each into a fresh repository; the median
-    of each phase.
+    """Import `dataset` (or the map file `path`, named `dataset`) `runs` times,
+    each into a fresh repository; the median of each phase.
 
     Returns:
-        JSON-ready figures: dataset, store, missions, elements, runs, the
-        median seconds of `parse_s`, `stage_s` (rows built and staged) and
-        `commit_s`, and the rates `parse_per_s`, `parse_stage_per_s` and
-        `end_to_end_per_s` (elements per second), plus the machine.
+        JSON-ready figures: dataset, store, missions, elements, points (of clouds
+        and laser scans), runs, the median seconds of `parse_s`, `stage_s` (rows
+        built and staged) and `commit_s`, and the rates `parse_per_s`,
+        `parse_stage_per_s` and `end_to_end_per_s` (elements per second), plus
+        the machine.
 
     Raises:
         UsageError: an unknown data set or store, or no runs.
     """
-    if dataset not in DATASETS:
+    if path is None and dataset not in DATASETS:
         raise UsageError(f"unknown data set {dataset!r}; choose from {', '.join(DATASETS)}")
     if store not in STORES:
         raise UsageError(f"unknown store {store!r}; choose from {', '.join(STORES)}")
     if runs < 1:
         raise UsageError(f"runs must be at least 1, not {runs}")
     machine = environment()
-    phases = [_one_run(samples / DATASETS[dataset], store, directory) for _ in range(runs)]
+    source = path or samples / DATASETS[dataset]
+    phases = [_one_run(source, store, directory) for _ in range(runs)]
     parse, stage, commit = (statistics.median(p[k] for p in phases) for k in range(3))
     elements = int(phases[0][3])
     return {
@@ -75,6 +78,7 @@ def measure_import(
         "store": store,
         "missions": int(phases[0][4]),
         "elements": elements,
+        "points": int(phases[0][5]),
         "runs": runs,
         "parse_s": round(parse, 4),
         "stage_s": round(stage, 4),
@@ -88,8 +92,8 @@ def measure_import(
 
 def _one_run(
     path: Path, store: str, directory: str | Path | None
-) -> tuple[float, float, float, int, int]:
-    """(parse s, stage s, commit s, elements, missions) of one import."""
+) -> tuple[float, float, float, int, int, int]:
+    """(parse s, stage s, commit s, elements, missions, points) of one import."""
     start = time.perf_counter()
     sources = read_source(path)
     parse = time.perf_counter() - start
@@ -100,9 +104,9 @@ def _one_run(
         return (parse, *asyncio.run(_import(peer_of(repo), sources)))
 
 
-async def _import(peer: Peer, sources: Sequence[MapSource]) -> tuple[float, float, int, int]:
-    """(seconds before the commits, seconds in them, elements, missions) of
-    importing `sources`."""
+async def _import(peer: Peer, sources: Sequence[MapSource]) -> tuple[float, float, int, int, int]:
+    """(seconds before the commits, seconds in them, elements, missions, points)
+    of importing `sources`."""
     try:
         start = time.perf_counter()
         results = await import_missions(peer, sources)
@@ -110,4 +114,5 @@ async def _import(peer: Peer, sources: Sequence[MapSource]) -> tuple[float, floa
     finally:
         await peer.close()
     commit = sum(r.commit_seconds for r in results)
-    return total - commit, commit, sum(r.elements() for r in results), len(results)
+    elements, points = sum(r.elements() for r in results), sum(r.points for r in results)
+    return total - commit, commit, elements, len(results), points

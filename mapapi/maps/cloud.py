@@ -98,7 +98,10 @@ def encode_points(points: Points) -> tuple[bytes, bool]:
     """The stored bytes of `points` and whether they are zlib-compressed (only
     when that is smaller: float coordinates often barely compress)."""
     raw = np.ascontiguousarray(points, dtype=_WIRE).tobytes()
-    packed = zlib.compress(raw, 6)
+    # level 1: float coordinates barely compress but for their zero bytes, which it
+    # finds as well as level 6 (1 % larger on the room scan and the Intel log's scans)
+    # in half the time
+    packed = zlib.compress(raw, 1)
     return (packed, True) if len(packed) < len(raw) else (raw, False)
 
 

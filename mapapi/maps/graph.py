@@ -79,6 +79,8 @@ class MissionGraph:
         edges: the edges this mission owns (inter-robot ones included).
         planar: True when it came from a 2D (SE2) source.
         origins: vertex index -> where the import read it (absent: nowhere).
+        timestamps: vertex index -> when the pose was taken, in seconds (absent:
+            the source has no time, as g2o and Kimera CSV files have not).
     """
 
     name: str
@@ -88,6 +90,7 @@ class MissionGraph:
     edges: list[GraphEdge] = field(default_factory=list)
     planar: bool = False
     origins: dict[int, Origin] = field(default_factory=dict)
+    timestamps: dict[int, float] = field(default_factory=dict)
 
     def bbox(self) -> BBox | None:
         """The box around the vertex positions (None without vertices)."""

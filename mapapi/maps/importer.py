@@ -3,7 +3,8 @@
 A pose graph gets a chunk for its mission row and, per spatial tile
 (`mapapi.maps.tiles`), a chunk of the tile's vertices and one of its edges (none
 for a tile without edges); the mission row lists the tiles. A point cloud gets
-one chunk for its mission row and one of point-cloud blocks. Everything is built
+one chunk for its mission row and one of point-cloud blocks; a laser mission
+(`mapapi.maps.laser`), a graph's chunks and one of its scans' blocks. Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
 checks every name of a set before the first commit, so a clash stops the set
@@ -24,12 +25,14 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
+from mapapi.maps.laser import LaserMission, scan_blocks
 from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, vertex_rows
 from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
     EDGES,
     GRAPH_TABLES,
+    LASER_TABLES,
     MISSIONS,
     VERTICES,
     Mission,
@@ -162,7 +165,13 @@ def _prepare(source: MapSource) -> _Prepared:
         if tile.edges:
             edges = partial(edge_rows, source, tile.edges)
             parts.append(_Part(EDGES, len(tile.edges), edges, tile))
-    return _Prepared(source, mission_to_pb(source), parts, GRAPH_TABLES, summary)
+    tables = GRAPH_TABLES
+    if isinstance(source, LaserMission) and source.scans:
+        # a scan is a block of its own, all in one chunk as a cloud's blocks are
+        parts.append(_Part(CLOUDS, len(source.scans), partial(scan_blocks, source)))
+        tables = LASER_TABLES
+        summary += f", {len(source.scans)} scans of {source.point_count()} points"
+    return _Prepared(source, mission_to_pb(source), parts, tables, summary)
 
 
 async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) -> ImportResult:
@@ -172,7 +181,8 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
     if isinstance(source, PointCloud):
         vertices, edges, points = 0, 0, len(source.points)
     else:
-        vertices, edges, points = len(source.vertices), len(source.edges), 0
+        vertices, edges = len(source.vertices), len(source.edges)
+        points = source.point_count() if isinstance(source, LaserMission) else 0
     return ImportResult(
         source.name,
         source.robot,

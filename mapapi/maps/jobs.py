@@ -26,6 +26,7 @@ from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.labels import map_labels
 from mapapi.maps.stored import CLOUD_READ, GRAPH_READ, cloud_at, graph_at
+from mapapi.maps.trajectory import TRAJECTORY_FORMATS, trajectory_of, write_kitti, write_tum
 from mapapi.service.peer import Peer
 from mapapi.service.repo import Repository
 
@@ -36,40 +37,81 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 
-def export_reads(target: Path) -> tuple[str, ...]:
-    """The tables an export to `target` reads (by its extension).
+EXPORT_FORMATS = ("g2o", *TRAJECTORY_FORMATS, *CLOUD_FORMATS)
+_BY_SUFFIX = {f".{fmt}": fmt for fmt in EXPORT_FORMATS}
+_AMBIGUOUS = {".txt": TRAJECTORY_FORMATS}  # TUM and KITTI files are both often .txt
+
+
+def export_format(target: Path, fmt: str | None = None) -> str:
+    """The format to write `target` in: `fmt`, else the one its extension names.
 
     Raises:
-        UsageError: not a .g2o, .ply or .pcd file.
+        UsageError: an unknown `fmt`, or an extension that names no format or
+            more than one (.txt), with no `fmt`.
     """
-    fmt = target.suffix.lower().lstrip(".")
-    if fmt == "g2o":
-        return GRAPH_READ
-    if fmt in CLOUD_FORMATS:
-        return CLOUD_READ
-    raise UsageError(f"export to a .g2o, .ply or .pcd file, not {target.name!r}")
+    if fmt is not None:
+        if fmt not in EXPORT_FORMATS:
+            raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(EXPORT_FORMATS)}")
+        if fmt in CLOUD_FORMATS and target.suffix.lower() != f".{fmt}":
+            # open3d, which writes clouds, picks the format by the extension alone
+            raise UsageError(f"a {fmt} file must end in .{fmt}, not {target.name!r}")
+        return fmt
+    suffix = target.suffix.lower()
+    if suffix in _AMBIGUOUS:
+        kinds = _AMBIGUOUS[suffix]
+        raise UsageError(
+            f"{target.name!r} could be a {' or a '.join(kinds)} file; "
+            f"pass {' or '.join(f'--format {k}' for k in kinds)}"
+        )
+    found = _BY_SUFFIX.get(suffix)
+    if found is None:
+        raise UsageError(
+            f"cannot tell the format to write {target.name!r} in from its extension; "
+            f"pass --format ({'|'.join(EXPORT_FORMATS)})"
+        )
+    return found
 
 
-def export_mission(peer: Peer, time: int, mission: str, target: Path) -> dict[str, int]:
-    """Write `mission` as of `time` to `target`: a graph as g2o (2D when it is
-    planar), a cloud as PLY or PCD, by the extension; what was written.
+def export_reads(fmt: str) -> tuple[str, ...]:
+    """The tables an export in `fmt` (one of `EXPORT_FORMATS`) reads."""
+    return CLOUD_READ if fmt in CLOUD_FORMATS else GRAPH_READ
+
+
+def export_mission(
+    peer: Peer, time: int, mission: str, target: Path, fmt: str
+) -> dict[str, int | str]:
+    """Write `mission` as of `time` to `target` in `fmt` (`export_format`): a
+    graph as g2o (2D when it is planar), its poses as a TUM or KITTI trajectory
+    (`mapapi.maps.trajectory`), a cloud as PLY or PCD; what was written.
 
     Raises:
-        UsageError: the mission has nothing of that kind, or a bad extension.
+        UsageError: the mission has nothing of that kind.
         MapImportError: no such mission.
     """
-    if export_reads(target) == GRAPH_READ:
-        graph = graph_at(peer, time, mission)
-        if not graph.vertices:
-            raise UsageError(f"mission {mission!r} has no pose graph; export it as .ply")
+    if fmt in CLOUD_FORMATS:
+        cloud = cloud_at(peer, time, mission)
+        if len(cloud.points) == 0:
+            raise UsageError(
+                f"mission {mission!r} has no point cloud, which a {fmt} file holds; "
+                "export its pose graph as .g2o, .tum or .kitti"
+            )
+        return {"points": write_cloud(cloud, target)}
+    graph = graph_at(peer, time, mission)
+    if not graph.vertices:
+        raise UsageError(
+            f"mission {mission!r} has no pose graph (a point cloud has no poses), "
+            f"which a {fmt} file holds; export it as .ply or .pcd"
+        )
+    if fmt == "g2o":
         written = _write_graph(graph, target)
         # edges to other missions' vertices have no place in a one-mission g2o file
         left_out = len(graph.edges) - written
         return {"vertices": len(graph.vertices), "edges": written, "left_out": left_out}
-    cloud = cloud_at(peer, time, mission)
-    if len(cloud.points) == 0:
-        raise UsageError(f"mission {mission!r} has no point cloud; export it as .g2o")
-    return {"points": write_cloud(cloud, target)}
+    trajectory = trajectory_of(graph)
+    write = write_tum if fmt == "tum" else write_kitti
+    with target.open("w", encoding="ascii") as out:
+        poses = write(trajectory, out)
+    return {"poses": poses, "time": "timestamp" if trajectory.timed else "index"}
 
 
 def draw_missions(

@@ -161,17 +161,17 @@ class MapOperations:
         done, total = self._imports.get(path, (0, 0))
         return {"path": path, "done": done, "total": total}
 
-    async def export_map(self, mission: str, path: str) -> Json:
-        """Write a mission to a file: a graph as g2o (2D when it is planar), a
-        cloud as PLY or PCD, by the extension (`mapapi.maps.jobs.export_mission`)."""
-        from mapapi.maps.jobs import export_mission, export_reads
+    async def export_map(self, mission: str, path: str, fmt: str | None = None) -> Json:
+        """Write a mission to a file in `fmt`, by default the one the extension
+        names: a graph as g2o (2D when it is planar), its poses as a TUM or KITTI
+        trajectory, a cloud as PLY or PCD (`mapapi.maps.jobs.export_mission`)."""
+        from mapapi.maps.jobs import export_format, export_mission, export_reads
         from mapapi.maps.stored import read_time
 
         target = _absolute(path)
-        reads = export_reads(target)
-        async with read_time(self.peer, [mission], reads) as at:
-            counts = await self._job(export_mission, at, mission, target)
-        fmt = target.suffix.lower().lstrip(".")
+        fmt = export_format(target, fmt)
+        async with read_time(self.peer, [mission], export_reads(fmt)) as at:
+            counts = await self._job(export_mission, at, mission, target, fmt)
         return {"mission": mission, "path": str(target), "format": fmt, **counts}
 
     async def missions(self, swarm: bool = False) -> Json:

@@ -67,11 +67,16 @@ def build_cloud_rows(cloud: PointCloud) -> dict[str, list[Message]]:
 
 
 def vertex_rows(graph: MissionGraph, indices: Sequence[int]) -> list[Message]:
-    """The rows of the vertices `indices`, with where the import read each."""
-    origins, poses, planar = graph.origins, graph.vertices, graph.planar
+    """The rows of the vertices `indices`, with where the import read each and
+    when its pose was taken."""
+    origins, poses, planar, stamps = graph.origins, graph.vertices, graph.planar, graph.timestamps
     return [
         vertex_to_pb(
-            graph.name, i, poses[i], lean_vertex(i, poses[i], origins.get(i, NO_ORIGIN), planar)
+            graph.name,
+            i,
+            poses[i],
+            lean_vertex(i, poses[i], origins.get(i, NO_ORIGIN), planar),
+            stamps.get(i, 0.0),
         )
         for i in indices
     ]

@@ -38,6 +38,7 @@ OriginPb = maps_pb2.Origin
 # table name -> payload class, for the tables a graph (or a cloud) import writes
 GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
 CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
+LASER_TABLES: dict[str, type[Message]] = {**GRAPH_TABLES, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {
     **GRAPH_TABLES,
     LANDMARKS: Landmark,
@@ -101,10 +102,17 @@ def origin_from_pb(message: maps_pb2.Origin) -> Origin:
 
 
 def vertex_to_pb(
-    mission: str, index: int, pose: Pose, origin: Origin = NO_ORIGIN
+    mission: str, index: int, pose: Pose, origin: Origin = NO_ORIGIN, timestamp: float = 0.0
 ) -> maps_pb2.Vertex:
-    """One vertex row, with where an import read it."""
-    return Vertex(mission=mission, index=index, pose=pose_to_pb(pose), origin=origin_to_pb(origin))
+    """One vertex row, with where an import read it and when the pose was taken
+    (seconds; 0: unknown)."""
+    return Vertex(
+        mission=mission,
+        index=index,
+        pose=pose_to_pb(pose),
+        timestamp=timestamp,
+        origin=origin_to_pb(origin),
+    )
 
 
 INFORMATION_SIZE = 21

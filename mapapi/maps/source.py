@@ -2,8 +2,9 @@
 
 Formats: `g2o` (one pose graph), `kimera-csv` (a folder of
 `robot*/measurements.csv`, one mission per robot, or one robot's CSV file),
-`ply` and `pcd` (one point cloud). The format follows from the extension (a
-folder is a Kimera set) unless given.
+`ply` and `pcd` (one point cloud), `carmen` (a laser log, `.clf` or `.clf.bz2`:
+a trajectory and its scans). The format follows from the extension (a folder
+is a Kimera set) unless given.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mapapi.core.errors import UsageError
+from mapapi.maps.carmen import read_carmen
 from mapapi.maps.cloud_file import CLOUD_FORMATS, DEFAULT_VOXEL, read_cloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.g2o import read_g2o
@@ -21,8 +23,8 @@ from mapapi.maps.kimera import KimeraReader, read_kimera
 
 Progress = Callable[[int, int], None]  # (units read, units in all; 0 while unknown)
 
-FORMATS = ("g2o", "kimera-csv", *CLOUD_FORMATS)
-_BY_SUFFIX = {".g2o": "g2o", ".csv": "kimera-csv", ".ply": "ply", ".pcd": "pcd"}
+FORMATS = ("g2o", "kimera-csv", *CLOUD_FORMATS, "carmen")
+_BY_SUFFIX = {".g2o": "g2o", ".csv": "kimera-csv", ".ply": "ply", ".pcd": "pcd", ".clf": "carmen"}
 
 
 def detect_format(path: str | Path) -> str:
@@ -34,6 +36,8 @@ def detect_format(path: str | Path) -> str:
     path = Path(path)
     if path.is_dir():
         return "kimera-csv"
+    if [s.lower() for s in path.suffixes[-2:]] == [".clf", ".bz2"]:
+        return "carmen"  # the one reader that takes a compressed file: logs ship so
     fmt = _BY_SUFFIX.get(path.suffix.lower())
     if fmt is None:
         raise UsageError(
@@ -87,6 +91,8 @@ def read_source(
         raise UsageError("--voxel applies to point clouds (ply, pcd) only")
     if fmt == "g2o":
         return [read_g2o(path, mission, robot or "", progress=progress)]
+    if fmt == "carmen":
+        return [read_carmen(path, mission, robot or "", progress=progress)]
     graphs = _read_kimera(path, mission or "", progress)
     if robot is not None:
         if len(graphs) != 1:

@@ -70,8 +70,9 @@ class MissionInfo:
 
     @property
     def kind(self) -> str:
-        """What the mission holds: "cloud" when it has points, else "graph"."""
-        return "cloud" if self.points else "graph"
+        """What the mission holds: "cloud" when it has points and no poses, else
+        "graph" (a laser mission has both: its trajectory is its graph)."""
+        return "cloud" if self.points and not self.vertices else "graph"
 
 
 @asynccontextmanager
@@ -158,6 +159,8 @@ def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
         if kind == 0:
             graph.vertices[message.index] = pose_from_pb(message.pose)
             graph.origins[message.index] = replace(origin_from_pb(message.origin), line=line)
+            if message.timestamp:
+                graph.timestamps[message.index] = message.timestamp
         else:
             edge = edge_from_pb(message)
             graph.edges.append(replace(edge, origin=replace(edge.origin, line=line)))

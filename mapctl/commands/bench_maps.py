@@ -157,11 +157,22 @@ def _render_registration(result: dict[str, Any], as_json: bool) -> None:
     show_default=True,
     help="A fresh repository on disk, or the in-memory store (leaves SQLite out).",
 )
+@click.option(
+    "--file",
+    "path",
+    type=click.Path(exists=True, path_type=Path),
+    help="Measure this map file instead (any format `mapctl import` reads; e.g. a CARMEN log).",
+)
 @per_run("--runs", 3, "Imports per data set, each into a fresh repository (the median counts).")
 @DIR_OPTION
 @json_option
 def bench_import(
-    datasets: tuple[str, ...], store: str, runs: int, directory: str | None, as_json: bool
+    datasets: tuple[str, ...],
+    store: str,
+    path: Path | None,
+    runs: int,
+    directory: str | None,
+    as_json: bool,
 ) -> None:
     """Graph elements (vertices + edges) imported per second (issue 5 target:
     50,000), for the parse alone, parse + staging, and end to end with the commit.
@@ -170,6 +181,12 @@ def bench_import(
     """
     from mapbench.maps import DATASETS, measure_import
 
+    if path is not None:
+        if datasets:
+            raise click.UsageError("--file and --dataset measure different maps; pass one")
+        result = measure_import(path.name, runs=runs, store=store, directory=directory, path=path)
+        measures(f"bench import: {path.name} ({store})", result, as_json)
+        return
     for dataset in datasets or DATASETS:
         result = measure_import(dataset, runs=runs, store=store, directory=directory)
         measures(f"bench import: {dataset} ({store})", result, as_json)

@@ -9,7 +9,8 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "ply", "pcd")  # mapapi.maps.source.FORMATS, kept import-free
+FORMATS = ("g2o", "kimera-csv", "ply", "pcd", "carmen")  # mapapi.maps.source.FORMATS
+EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd")  # mapapi.maps.jobs.EXPORT_FORMATS
 
 
 def _bbox_text(box: list[float] | None) -> str:
@@ -19,9 +20,14 @@ def _bbox_text(box: list[float] | None) -> str:
 def _size_text(mission: dict[str, Any]) -> str:
     if mission["vertices"] is None:
         return "?"  # held elsewhere: only its box is known here
-    if mission["points"]:
-        return f"{mission['points']} points"
-    return f"{mission['vertices']} v + {mission['edges']} e"
+    graph = f"{mission['vertices']} v + {mission['edges']} e"
+    if mission["points"]:  # a cloud, or a laser mission's scans
+        return (
+            f"{graph}, {mission['points']} points"
+            if mission["vertices"]
+            else f"{mission['points']} points"
+        )
+    return graph
 
 
 def _holders_text(holders: list[dict[str, Any]]) -> str:
@@ -57,7 +63,8 @@ def import_map(
     voxel: float | None,
     as_json: bool,
 ) -> None:
-    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud.
+    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud,
+    CARMEN laser log (.clf, .clf.bz2).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -95,15 +102,27 @@ def _output_option(text: str) -> Any:
 
 @click.command("export")
 @click.argument("mission")
-@_output_option("The file to write: .g2o for a pose graph, .ply or .pcd for a point cloud.")
+@_output_option(
+    "The file to write: .g2o for a pose graph, .tum or .kitti for its trajectory, "
+    ".ply or .pcd for a point cloud."
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(EXPORT_FORMATS),
+    help="The format to write (default: by the extension; needed for .txt).",
+)
 @json_option
 @pass_session
-def export_map(session: Session, mission: str, output: Path, as_json: bool) -> None:
+def export_map(
+    session: Session, mission: str, output: Path, fmt: str | None, as_json: bool
+) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
-    a point cloud as binary PLY (or PCD)."""
+    its poses as a TUM or KITTI trajectory (in the mission's frame), a point
+    cloud as binary PLY (or PCD)."""
     from mapctl import render
 
-    info = session.call("export_map", mission=mission, path=str(output.resolve()))
+    info = session.call("export_map", mission=mission, path=str(output.resolve()), fmt=fmt)
     if as_json:
         render.emit_json(info)
         return
@@ -111,6 +130,9 @@ def export_map(session: Session, mission: str, output: Path, as_json: bool) -> N
         what = f"{info['vertices']} vertices, {info['edges']} edges"
         if info["left_out"]:
             what += f" ({info['left_out']} edges to other missions left out)"
+    elif "poses" in info:
+        clock = "timed" if info["time"] == "timestamp" else "no timestamps: the index is the time"
+        what = f"{info['poses']} poses ({clock})"
     else:
         what = f"{info['points']} points"
     render.line(f"wrote mission {mission} to {output}: {what}")

@@ -14,6 +14,7 @@ SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 INTEL = SAMPLES / "pose_graphs" / "intel.g2o"
 TUNNELS = SAMPLES / "kimera_multi_tunnels_8robots"
 ROOM = SAMPLES / "point_clouds" / "room_scan1.pcd"
+LOG = SAMPLES / "laser_logs" / "intel-head.clf.bz2"
 EXIT_USAGE, EXIT_NETWORK = 2, 5
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -53,6 +54,26 @@ class TestImport:
         assert [m["name"] for m in info["missions"]] == [f"tunnels-robot{i}" for i in range(8)]
         assert sum(m["vertices"] for m in info["missions"]) == 1_255
         assert len(mapctl.json("log")) == 8
+
+    def test_a_carmen_log_is_a_trajectory_with_its_scans(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        info = mapctl.json("import", str(LOG), "--robot", "hahnel")
+        assert (info["format"], info["elements"]) == ("carmen", 671 + 670)
+        (mission,) = info["missions"]
+        assert (mission["name"], mission["vertices"], mission["points"]) == (
+            "intel-head",
+            671,
+            info["points"],
+        )
+        assert set(mission["chunks"]) == {"missions", "pointclouds"}
+        (listed,) = mapctl.json("missions")["missions"]
+        assert (listed["kind"], listed["edges"], listed["points"]) == ("graph", 670, info["points"])
+        broken = tmp_path / "broken.clf"
+        broken.write_text("ODOM 0 0 0 0 0 0 1 h 1\nFLASER 2 1.0 x 0 0 0 0 0 0 2 h 2\n")
+        outcome = mapctl.main("import", str(broken))
+        assert outcome.code == EXIT_USAGE
+        assert f"{broken}:2: FLASER: could not convert string to float: 'x'" in outcome.err
 
     def test_a_point_cloud_with_and_without_downsampling(self, mapctl: Mapctl) -> None:
         full = mapctl.json("import", str(ROOM), "--voxel", "0", "--mission", "full")
@@ -158,6 +179,16 @@ class TestMissionsAndExport:
         out = tmp_path / "room.ply"
         assert "112586 points" in mapctl("export", "room_scan1", "-o", str(out))
         assert out.read_bytes().startswith(b"ply\n")
+
+    def test_a_trajectory_by_extension_or_format(self, intel: Mapctl, tmp_path: Path) -> None:
+        said = intel("export", "intel", "-o", str(tmp_path / "intel.tum"))
+        assert "1728 poses (no timestamps: the index is the time)" in said
+        outcome = intel.main("export", "intel", "-o", str(tmp_path / "intel.txt"))
+        assert outcome.code == EXIT_USAGE
+        assert "pass --format tum or --format kitti" in outcome.err
+        info = intel.json("export", "intel", "-o", str(tmp_path / "intel.txt"), "--format", "kitti")
+        assert (info["format"], info["poses"], info["time"]) == ("kitti", 1_728, "index")
+        assert len((tmp_path / "intel.txt").read_text().splitlines()[0].split()) == 12
 
     def test_export_of_an_unknown_mission_exits_2(self, intel: Mapctl, tmp_path: Path) -> None:
         outcome = intel.main("export", "nope", "-o", str(tmp_path / "x.g2o"))

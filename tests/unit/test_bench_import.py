@@ -41,3 +41,15 @@ def test_the_command_prints_one_json_object_per_data_set() -> None:
     assert result.exit_code == 0, result.output
     (row,) = [json.loads(line) for line in result.stdout.splitlines()]
     assert (row["dataset"], row["missions"], row["elements"]) == ("tunnels", 8, 6_146)
+
+
+def test_any_map_file_is_measured_with_its_points(tmp_path: Path) -> None:
+    log = Path(__file__).resolve().parents[2] / "sample_maps" / "laser_logs" / "intel-head.clf.bz2"
+    args = ["bench", "import", "--file", str(log), "--store", "memory", "--runs", "1", "--json"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    row = json.loads(result.stdout)
+    assert (row["dataset"], row["elements"]) == ("intel-head.clf.bz2", 671 + 670)
+    assert row["points"] > 100_000
+    refused = CliRunner().invoke(cli, [*args, "--dataset", "intel"])
+    assert refused.exit_code == 2

@@ -158,8 +158,8 @@ class TestG2oRoundTrip:
             await ops.export_map("nope", str(tmp_path / "x.g2o"))
         with pytest.raises(UsageError, match="no point cloud"):
             await ops.export_map("intel", str(tmp_path / "x.ply"))
-        with pytest.raises(UsageError, match=r"\.g2o, \.ply or \.pcd"):
-            await ops.export_map("intel", str(tmp_path / "x.txt"))
+        with pytest.raises(UsageError, match=r"pass --format \(g2o\|tum\|kitti\|ply\|pcd\)"):
+            await ops.export_map("intel", str(tmp_path / "x.csv"))
 
 
 class TestNothingOfASetHalfImported:

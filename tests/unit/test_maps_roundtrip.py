@@ -11,18 +11,24 @@ sample_maps/ is imported into a peer on a real repository and exported again.
 - A point cloud is downsampled into blocks at import and the order of its
   points is not kept (DESIGN "Maps"): with `--voxel 0` the exported cloud
   holds exactly the source's points, and exporting twice gives the same bytes.
+- A CARMEN laser log is no format `export` writes: its trajectory exports as
+  TUM with the scans' times and odometry poses (read back with evo), and its
+  scans as a cloud of the points they project to.
 """
 
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from evo.tools.file_interface import read_tum_trajectory_file
 
 from mapapi import Peer
 from mapapi.maps import read_kimera
+from mapapi.maps.carmen import Scan, open_log, read_carmen, read_records
 from mapapi.maps.cloud_file import read_cloud
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.operations import MapOperations
@@ -32,6 +38,7 @@ SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
 G2O_FILES = sorted(SAMPLES.rglob("*.g2o"))
 KIMERA_FOLDERS = sorted({p.parent.parent for p in SAMPLES.rglob("measurements.csv")})
 CLOUD_FILES = sorted(p for e in ("*.pcd", "*.ply") for p in SAMPLES.rglob(e))
+LOG_FILES = sorted(SAMPLES.rglob("*.clf.bz2"))
 NOT_MAPS = {"README.md", "SHA256SUMS"}
 
 
@@ -58,7 +65,7 @@ async def ops(make_peer) -> MapOperations:  # type: ignore[no-untyped-def]
 
 def test_every_sample_map_is_covered() -> None:
     """A map added to sample_maps/ must get a round trip here."""
-    covered = set(G2O_FILES) | set(CLOUD_FILES)
+    covered = set(G2O_FILES) | set(CLOUD_FILES) | set(LOG_FILES)
     covered |= {p for folder in KIMERA_FOLDERS for p in folder.rglob("measurements.csv")}
     maps = {
         p
@@ -66,7 +73,7 @@ def test_every_sample_map_is_covered() -> None:
         if p.is_file() and p.name not in NOT_MAPS and not p.name.startswith("LICENSE")
     }
     assert maps == covered
-    assert (len(G2O_FILES), len(KIMERA_FOLDERS), len(CLOUD_FILES)) == (2, 1, 1)
+    assert (len(G2O_FILES), len(KIMERA_FOLDERS), len(CLOUD_FILES), len(LOG_FILES)) == (2, 1, 1, 1)
 
 
 @pytest.mark.parametrize("source", G2O_FILES, ids=lambda p: p.name)
@@ -160,3 +167,28 @@ async def test_a_cloud_exports_its_points_the_same_way_twice(
     exported = read_cloud(first, voxel=0).points
     original = read_cloud(source, voxel=0).points
     assert np.array_equal(np.unique(exported, axis=0), np.unique(original, axis=0))
+
+
+@pytest.mark.parametrize("source", LOG_FILES, ids=lambda p: p.name)
+async def test_a_laser_log_exports_its_trajectory_and_its_scans(
+    ops: MapOperations, source: Path, tmp_path: Path
+) -> None:
+    info = await ops.import_map(str(source))
+    (mission,) = info["missions"]
+    with open_log(source) as log:
+        scans = [r for r in read_records(log) if isinstance(r, Scan)]
+
+    exported = await ops.export_map(mission["name"], str(tmp_path / "log.tum"))
+
+    assert (exported["poses"], exported["time"]) == (len(scans), "timestamp")
+    read = read_tum_trajectory_file(tmp_path / "log.tum")
+    assert read.timestamps.tolist() == [s.timestamp for s in scans]
+    assert read.positions_xyz.tolist() == [[s.odometry[0], s.odometry[1], 0.0] for s in scans]
+    yaws = [2 * math.atan2(q[3], q[0]) for q in read.orientations_quat_wxyz]
+    assert yaws == pytest.approx([s.odometry[2] for s in scans], abs=1e-12)
+    await ops.export_map(mission["name"], str(tmp_path / "scans.ply"))
+    points = read_cloud(tmp_path / "scans.ply", voxel=0).points
+    laser = read_carmen(source)
+    projected = np.concatenate(list(laser.scans.values()))
+    assert len(points) == mission["points"] == len(projected)
+    assert np.array_equal(np.unique(points, axis=0), np.unique(projected, axis=0))

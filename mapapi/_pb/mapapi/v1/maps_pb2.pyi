@@ -163,15 +163,17 @@ class Landmark(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., position: _Optional[_Union[Point3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class PointCloudBlock(_message.Message):
-    __slots__ = ("mission", "points", "count", "bbox", "compressed")
+    __slots__ = ("mission", "points", "count", "bbox", "compressed", "vertex")
     MISSION_FIELD_NUMBER: _ClassVar[int]
     POINTS_FIELD_NUMBER: _ClassVar[int]
     COUNT_FIELD_NUMBER: _ClassVar[int]
     BBOX_FIELD_NUMBER: _ClassVar[int]
     COMPRESSED_FIELD_NUMBER: _ClassVar[int]
+    VERTEX_FIELD_NUMBER: _ClassVar[int]
     mission: str
     points: bytes
     count: int
     bbox: Box3
     compressed: bool
-    def __init__(self, mission: _Optional[str] = ..., points: _Optional[bytes] = ..., count: _Optional[int] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., compressed: _Optional[bool] = ...) -> None: ...
+    vertex: int
+    def __init__(self, mission: _Optional[str] = ..., points: _Optional[bytes] = ..., count: _Optional[int] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., compressed: _Optional[bool] = ..., vertex: _Optional[int] = ...) -> None: ...
