@@ -18,6 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mapapi.maps.align_ops import AlignOperations
 from mapapi.maps.labels import map_labels
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.rules import map_rules
@@ -63,14 +64,16 @@ def operations(
     """Every operation `mapctl` runs, over `peer`: the repository's, the views',
     the swarm's (`peer status` with the daemon's `loop_lag`), watches, the maps'
     and (`on_shutdown` given: in a daemon) `shutdown`."""
+    views = Workspace(peer)  # one per peer: it serialises the commits of each view
     return Operations(
         peer,
         (
             RepoOperations(peer),
-            ViewOperations(peer, Workspace(peer)),
+            ViewOperations(peer, views),
             SwarmOperations(peer, loop_lag),
             WatchOperations(peer),
             MapOperations(peer),
+            AlignOperations(peer, views),
             DaemonOperations(on_shutdown),
             FsckOperations(peer),
             GcOperations(peer),

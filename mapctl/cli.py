@@ -9,7 +9,19 @@ from pathlib import Path
 import click
 
 from mapctl import completion
-from mapctl.commands import bench, demo, history, lookup, maps, peer, repo, security, view, watch
+from mapctl.commands import (
+    align,
+    bench,
+    demo,
+    history,
+    lookup,
+    maps,
+    peer,
+    repo,
+    security,
+    view,
+    watch,
+)
 from mapctl.session import Session
 
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
@@ -42,7 +54,7 @@ def cli(ctx: click.Context, path: Path, view_name: str, verbose: bool) -> None:
     ctx.call_on_close(session.close)
 
 
-for module in (repo, view, history, peer, security, lookup, watch, maps, bench, demo):
+for module in (repo, view, history, peer, security, lookup, watch, maps, align, bench, demo):
     module.register(cli)
 completion.register(cli)  # last: it attaches TAB completion to the commands above
 

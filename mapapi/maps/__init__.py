@@ -19,7 +19,7 @@ from mapapi.maps.errors import MapImportError
 from mapapi.maps.g2o import parse_g2o, read_g2o, write_g2o
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, VertexKey, chain_odometry
 from mapapi.maps.kimera import KimeraReader, read_kimera
-from mapapi.maps.schema import CLOUDS, EDGES, LANDMARKS, MISSIONS, VERTICES
+from mapapi.maps.schema import CLOUDS, EDGES, FRAMES, LANDMARKS, MISSIONS, VERTICES
 
 if TYPE_CHECKING:
     from mapapi.maps.cloud import PointCloud
@@ -69,6 +69,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "CLOUDS",
     "EDGES",
+    "FRAMES",
     "LANDMARKS",
     "MISSIONS",
     "VERTICES",

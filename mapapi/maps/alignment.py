@@ -90,6 +90,19 @@ def residuals(error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return translation, np.arctan2(np.linalg.norm(axis, axis=0) / 2.0, cosine)
 
 
+def rigid_fit(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The rigid motion (4x4) that best takes points `source` onto `target` (both
+    n x 3) in least squares: Kabsch's method, with no reflection."""
+    mean_s, mean_t = source.mean(axis=0), target.mean(axis=0)
+    u, _, vt = np.linalg.svd((source - mean_s).T @ (target - mean_t))
+    sign = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    rotation = vt.T @ np.diag([1.0, 1.0, sign]) @ u.T
+    motion = np.eye(4)
+    motion[:3, :3] = rotation
+    motion[:3, 3] = mean_t - rotation @ mean_s
+    return motion
+
+
 @dataclass(frozen=True)
 class Link:
     """An inter-mission edge seen from the reference: ``g⁻¹ · T · a ≈ measured``.

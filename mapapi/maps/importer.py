@@ -1,10 +1,11 @@
 """Store missions in a peer: one transaction per mission, all or nothing.
 
-A pose graph gets a chunk for its mission row and, per spatial tile
-(`mapapi.maps.tiles`), a chunk of the tile's vertices and one of its edges (none
-for a tile without edges); the mission row lists the tiles. A point cloud gets
-one chunk for its mission row and one of point-cloud blocks; a laser mission
-(`mapapi.maps.laser`), a graph's chunks and one of its scans' blocks. Everything is built
+A pose graph gets a chunk for its mission row, one for its frames (empty until
+`mapctl align`) and, per spatial tile (`mapapi.maps.tiles`), a chunk of the
+tile's vertices and one of its edges (none for a tile without edges); the
+mission row lists them. A point cloud gets one chunk for its mission row and one
+of point-cloud blocks; a laser mission (`mapapi.maps.laser`), a graph's chunks
+and one of its scans' blocks. Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
 checks every name of a set before the first commit, so a clash stops the set
@@ -31,6 +32,7 @@ from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
     EDGES,
+    FRAMES,
     GRAPH_TABLES,
     LASER_TABLES,
     MISSIONS,
@@ -158,7 +160,10 @@ def _prepare(source: MapSource) -> _Prepared:
     check_graph(source)
     tiles = tile_graph(source)
     summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"
-    parts = []
+    # The chunk of the mission's place in shared frames (`mapctl align`), made with
+    # the mission so every aligner writes that one chunk: two alignments then
+    # conflict on its rows, where chunks made by each would split it in two.
+    parts = [_Part(FRAMES, 0, list)]
     for tile in tiles:
         vertices = partial(vertex_rows, source, tile.vertices)
         parts.append(_Part(VERTICES, len(tile.vertices), vertices, tile))

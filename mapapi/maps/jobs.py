@@ -17,21 +17,24 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Concatenate, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec, TypeVar
 
 from mapapi.core.errors import UsageError
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud_file import CLOUD_FORMATS, write_cloud
+from mapapi.maps.frames import MISSION, frame_reads, graph_in
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.labels import map_labels
-from mapapi.maps.stored import CLOUD_READ, GRAPH_READ, cloud_at, graph_at
+from mapapi.maps.stored import CLOUD_READ, cloud_at, graph_at
 from mapapi.maps.trajectory import TRAJECTORY_FORMATS, trajectory_of, write_kitti, write_tum
 from mapapi.service.peer import Peer
+from mapapi.service.processes import in_process
 from mapapi.service.repo import Repository
 
 if TYPE_CHECKING:
     from mapapi.maps.plot import PlotResult
+    from mapapi.maps.world import WorldAlignment
 
 P = ParamSpec("P")
 T = TypeVar("T")
@@ -72,20 +75,29 @@ def export_format(target: Path, fmt: str | None = None) -> str:
     return found
 
 
-def export_reads(fmt: str) -> tuple[str, ...]:
-    """The tables an export in `fmt` (one of `EXPORT_FORMATS`) reads."""
-    return CLOUD_READ if fmt in CLOUD_FORMATS else GRAPH_READ
+def export_reads(fmt: str, frame: str = MISSION) -> tuple[str, ...]:
+    """The tables an export in `fmt` (one of `EXPORT_FORMATS`) reads, its poses in `frame`.
+
+    Raises:
+        UsageError: an unknown frame, or a cloud in the world frame.
+    """
+    if fmt not in CLOUD_FORMATS:
+        return frame_reads(frame)
+    if frame != MISSION:
+        raise UsageError("a point cloud is written in its mission's frame (--frame mission)")
+    return CLOUD_READ
 
 
 def export_mission(
-    peer: Peer, time: int, mission: str, target: Path, fmt: str
+    peer: Peer, time: int, mission: str, target: Path, fmt: str, frame: str = MISSION
 ) -> dict[str, int | str]:
     """Write `mission` as of `time` to `target` in `fmt` (`export_format`): a
     graph as g2o (2D when it is planar), its poses as a TUM or KITTI trajectory
-    (`mapapi.maps.trajectory`), a cloud as PLY or PCD; what was written.
+    (`mapapi.maps.trajectory`), a cloud as PLY or PCD; what was written. A
+    graph's poses are in `frame` (`frames.graph_in`).
 
     Raises:
-        UsageError: the mission has nothing of that kind.
+        UsageError: the mission has nothing of that kind, or no place in `frame`.
         MapImportError: no such mission.
     """
     if fmt in CLOUD_FORMATS:
@@ -96,7 +108,7 @@ def export_mission(
                 "export its pose graph as .g2o, .tum or .kitti"
             )
         return {"points": write_cloud(cloud, target)}
-    graph = graph_at(peer, time, mission)
+    graph = graph_in(peer, time, mission, frame)
     if not graph.vertices:
         raise UsageError(
             f"mission {mission!r} has no pose graph (a point cloud has no poses), "
@@ -124,14 +136,44 @@ def draw_missions(
     zoom: bool,
     title: str | None,
     labels: Mapping[str, str] | None,
+    frame: str = MISSION,
 ) -> PlotResult:
     """Draw the missions `chosen` ((name, kind) pairs, kind "cloud" or "graph") as
-    of `time` to the PNG `target` (see `mapapi.maps.plot.plot_map`)."""
+    of `time` to the PNG `target` (see `mapapi.maps.plot.plot_map`), the graphs'
+    poses in `frame`.
+
+    Raises:
+        UsageError: in the world frame, a cloud is chosen or a graph was never aligned.
+    """
     from mapapi.maps.plot import plot_map
 
-    graphs = [graph_at(peer, time, name) for name, kind in chosen if kind != "cloud"]
-    clouds = [cloud_at(peer, time, name) for name, kind in chosen if kind == "cloud"]
+    named = [name for name, kind in chosen if kind == "cloud"]
+    if named and frame != MISSION:
+        raise UsageError(
+            f"point clouds have no place in the {frame} frame: {', '.join(named)}; "
+            "choose the pose graphs with --mission"
+        )
+    graphs = [graph_in(peer, time, name, frame) for name, kind in chosen if kind != "cloud"]
+    clouds = [cloud_at(peer, time, name) for name in named]
     return plot_map(target, graphs, clouds, box, up, zoom=zoom, title=title, labels=labels)
+
+
+def align_at(peer: Peer, time: int, names: list[str], anchor: str | None) -> WorldAlignment:
+    """Place the missions `names` as of `time` in one world frame
+    (`mapapi.maps.world.align_world`: gtsam, which holds the interpreter lock)."""
+    from mapapi.maps.world import align_world
+
+    return align_world([graph_at(peer, time, name) for name in names], anchor)
+
+
+async def run_job(peer: Peer, job: Callable[..., T], *args: Any) -> T:
+    """Run a long map job off the event loop: in a process of its own that opens
+    the store, while `peer` serves a swarm (its heartbeats must keep their pace:
+    issue 14 §1); else in a worker thread."""
+    store = getattr(peer.store, "path", None)
+    if peer.swarm is None or not isinstance(store, Path):
+        return await peer.off_loop(job, peer, *args)
+    return await in_process(in_repository, store, job, *args)
 
 
 def in_repository(

@@ -4,7 +4,8 @@ the mission's name, so the store indexes a mission's rows and keeps its summary.
 - a mission row is labelled with its name, placed at its box;
 - vertices and landmarks with their mission, placed at their position;
 - edges with their mission (they have no place);
-- point-cloud blocks with their mission, weighing their points, placed at their box.
+- point-cloud blocks with their mission, weighing their points, placed at their box;
+- frames (`mapctl align`) with their mission (they have no place).
 
 `mapapi.app` gives these to the store of every peer it builds on a repository,
 as it gives the mission rules; reads of a mission ask for them (`MAP_LABELS`)
@@ -19,10 +20,10 @@ from typing import Any
 
 from google.protobuf.message import DecodeError
 
-from mapapi.maps.schema import Edge, Landmark, Mission, PointCloudBlock, Vertex
+from mapapi.maps.schema import Edge, Frame, Landmark, Mission, PointCloudBlock, Vertex
 from mapapi.store.labels import Box, LabelFn, Labels, RowLabel
 
-VERSION = "1"
+VERSION = "2"
 """Bumped when a function below changes what it answers (stores then relabel)."""
 
 
@@ -67,6 +68,7 @@ def map_labels() -> Labels:
             Landmark, lambda m: RowLabel(m.mission, 1, _point(m.position))
         ),
         PointCloudBlock.DESCRIPTOR.full_name: _reader(PointCloudBlock, _block),
+        Frame.DESCRIPTOR.full_name: _reader(Frame, lambda m: RowLabel(m.mission)),
     }
     return Labels(by_type, VERSION)
 

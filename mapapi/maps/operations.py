@@ -37,7 +37,6 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.schema import CLOUDS, MISSIONS
 from mapapi.service.ops import Operation
-from mapapi.service.processes import in_process
 from mapapi.service.transfer_ops import online, placed_json
 
 if TYPE_CHECKING:
@@ -161,18 +160,21 @@ class MapOperations:
         done, total = self._imports.get(path, (0, 0))
         return {"path": path, "done": done, "total": total}
 
-    async def export_map(self, mission: str, path: str, fmt: str | None = None) -> Json:
+    async def export_map(
+        self, mission: str, path: str, fmt: str | None = None, frame: str = "mission"
+    ) -> Json:
         """Write a mission to a file in `fmt`, by default the one the extension
         names: a graph as g2o (2D when it is planar), its poses as a TUM or KITTI
-        trajectory, a cloud as PLY or PCD (`mapapi.maps.jobs.export_mission`)."""
+        trajectory, a cloud as PLY or PCD (`mapapi.maps.jobs.export_mission`);
+        a graph's poses in `frame` ("world" once aligned)."""
         from mapapi.maps.jobs import export_format, export_mission, export_reads
         from mapapi.maps.stored import read_time
 
         target = _absolute(path)
         fmt = export_format(target, fmt)
-        async with read_time(self.peer, [mission], export_reads(fmt)) as at:
-            counts = await self._job(export_mission, at, mission, target, fmt)
-        return {"mission": mission, "path": str(target), "format": fmt, **counts}
+        async with read_time(self.peer, [mission], export_reads(fmt, frame)) as at:
+            counts = await self._job(export_mission, at, mission, target, fmt, frame)
+        return {"mission": mission, "path": str(target), "format": fmt, "frame": frame, **counts}
 
     async def missions(self, swarm: bool = False) -> Json:
         """The missions held here with their counts, box and holders; with
@@ -218,15 +220,10 @@ class MapOperations:
         return member_json(member) if member else {"id": peer_id, "name": "", "address": address}
 
     async def _job(self, job: Callable[..., T], *args: Any) -> T:
-        """Run a long map job (`mapapi.maps.jobs`) off the event loop: in a process
-        of its own that opens the store, while this peer serves a swarm (its
-        heartbeats must keep their pace: issue 14 §1); else in a worker thread."""
-        from mapapi.maps.jobs import in_repository
+        """Run a long map job (`mapapi.maps.jobs.run_job`) off the event loop."""
+        from mapapi.maps.jobs import run_job
 
-        store = getattr(self.peer.store, "path", None)
-        if self.peer.swarm is None or not isinstance(store, Path):
-            return await self.peer.off_loop(job, self.peer, *args)
-        return await in_process(in_repository, store, job, *args)
+        return await run_job(self.peer, job, *args)
 
     async def plot_map(
         self,
@@ -237,25 +234,34 @@ class MapOperations:
         zoom: bool = False,
         title: str | None = None,
         labels: dict[str, str] | None = None,
+        frame: str = "mission",
     ) -> Json:
         """Draw a top-down PNG of the missions named or matching a pattern
         (default: every mission held here, or those overlapping `bbox`), with
         `bbox` outlined; `zoom` shows the box and its surroundings only;
-        `labels` maps a mission's name to its legend entry."""
+        `labels` maps a mission's name to its legend entry; the graphs' poses are
+        in `frame` ("world" once aligned)."""
+        from mapapi.maps.frames import frame_reads
         from mapapi.maps.jobs import draw_missions
-        from mapapi.maps.stored import GRAPH_READ, list_missions, read_time
+        from mapapi.maps.stored import list_missions, read_time
 
         box = None if bbox is None else BBox.from_tuple(bbox)
-        chosen = [(i.name, i.kind) for i in _choose(await list_missions(self.peer), missions, box)]
+        chosen = [
+            (i.name, i.kind) for i in choose_missions(await list_missions(self.peer), missions, box)
+        ]
         target = _absolute(path)
-        async with read_time(self.peer, [name for name, _ in chosen], (*GRAPH_READ, CLOUDS)) as at:
-            drawn = await self._job(draw_missions, at, chosen, target, box, up, zoom, title, labels)
+        reads = (*frame_reads(frame), CLOUDS)
+        async with read_time(self.peer, [name for name, _ in chosen], reads) as at:
+            drawn = await self._job(
+                draw_missions, at, chosen, target, box, up, zoom, title, labels, frame
+            )
         return {
             "path": str(target),
             "renderer": drawn.renderer,
             "up": drawn.up,
             "missions": drawn.missions,
             "bbox": _box(box),
+            "frame": frame,
         }
 
     async def load_bbox(self, bbox: list[float], table: str | None = None) -> Json:
@@ -361,10 +367,11 @@ def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:
     }
 
 
-def _choose(
+def choose_missions(
     held: list[MissionInfo], names: list[str] | None, box: BBox | None
 ) -> list[MissionInfo]:
-    """The missions to draw (see `plot_map`); a name may be a shell pattern
+    """The missions named (default: those in `box`, or all) held here, to draw or
+    align (see `plot_map`); a name may be a shell pattern
     (`tunnels-*`).
 
     Raises:

@@ -33,7 +33,15 @@ from typing import Any
 import numpy as np
 
 from mapapi.core.errors import MapError, UsageError
-from mapapi.maps.alignment import Link, consensus_frame, invert, matrix_pose, pose_matrix, residuals
+from mapapi.maps.alignment import (
+    Link,
+    consensus_frame,
+    invert,
+    matrix_pose,
+    pose_matrix,
+    residuals,
+    rigid_fit,
+)
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, VertexKey
 from mapapi.maps.se3 import Pose, upper_index
 
@@ -48,6 +56,7 @@ INLIER_PROBABILITY = 0.99
 at most 1 % probability (the chi-square bound of its 6 degrees of freedom)."""
 
 _GTSAM_AXES = (3, 4, 5, 0, 1, 2)  # gtsam's Pose3 tangent is (rx, ry, rz, x, y, z); ours x first
+_OUR_AXES = _GTSAM_AXES  # the same swap takes gtsam's order back to ours
 _PRIOR_SIGMA = 1e-6  # the gauge: the reference's first vertex stays where it is
 _WEAK = 1e-6  # of the strongest axis: information for an axis a measurement says nothing about
 
@@ -128,20 +137,66 @@ def register_missions(
             information matrix is not positive definite.
         RegistrationError: gtsam failed to optimise.
     """
-    gtsam = require_gtsam()
     graphs = [reference, *incoming]
     _check_names(graphs)
-    edges = _edges_among(graphs)
-    position = {g.name: m for m, g in enumerate(graphs)}
+    edges = edges_among(graphs)
     starts = {reference.name: np.eye(4)}
     for graph in incoming:
-        links = [_link(e, reference, graph) for e in edges if _joins(e, reference, graph)]
+        links = links_between(edges, reference, graph)
         if len(links) < min_edges:
             raise UsageError(
                 f"mission {graph.name!r} shares {len(links)} edges with {reference.name!r}; "
                 f"registering it needs at least {min_edges}"
             )
         starts[graph.name] = consensus_frame(links)[0]
+    solved = optimise_missions(graphs, starts)
+    frames = {g.name: solved.frames[g.name] for g in incoming}
+    return Registration(
+        reference.name, frames, solved.edges, solved.inliers, solved.before, solved.after
+    )
+
+
+@dataclass(frozen=True)
+class Optimised:
+    """What `optimise_missions` found.
+
+    Attributes:
+        frames: mission -> its frame in the first mission's (the pose of its origin).
+        fitted: mission -> the rigid motion that best takes its stored positions
+            onto its optimised ones (least squares over every vertex): where its
+            stored trajectory lies best, drift and all, in the first mission's frame.
+        covariances: mission -> the 6x6 covariance of its frame (x, y, z, rx, ry,
+            rz), from the marginals of the graph of the edges GNC kept; empty
+            unless asked for.
+        edges, inliers, before, after: as in `Registration`.
+        kept: mission pair (sorted) -> the inter-mission edges GNC kept between them.
+    """
+
+    frames: dict[str, Pose]
+    fitted: dict[str, Pose]
+    covariances: dict[str, np.ndarray]
+    edges: int
+    inliers: int
+    before: Residual
+    after: Residual
+    kept: dict[tuple[str, str], int]
+
+
+def optimise_missions(
+    graphs: Sequence[MissionGraph], starts: dict[str, np.ndarray], *, covariance: bool = False
+) -> Optimised:
+    """Optimise missions' poses together, each starting in the frame `starts` gives
+    it, with the first mission's first vertex held fixed (the gauge): steps 2 and 3
+    of the module docstring. With `covariance`, also each frame's covariance.
+
+    Raises:
+        UsageError: gtsam is missing; an edge names a vertex its mission lacks; an
+            information matrix is not positive definite.
+        RegistrationError: gtsam failed to optimise.
+    """
+    gtsam = require_gtsam()
+    edges = edges_among(graphs)
+    position = {g.name: m for m, g in enumerate(graphs)}
     initial = {
         _key(position, (g.name, i)): starts[g.name] @ pose_matrix(p)
         for g in graphs
@@ -150,7 +205,7 @@ def register_missions(
     factors, values, known = gtsam.NonlinearFactorGraph(), gtsam.Values(), []
     for key, matrix in initial.items():
         values.insert(key, gtsam.Pose3(matrix))
-    first = _key(position, (reference.name, min(reference.vertices)))
+    first = _key(position, (graphs[0].name, min(graphs[0].vertices)))
     known.append(factors.size())
     sigma = gtsam.noiseModel.Isotropic.Sigma(6, _PRIOR_SIGMA)
     factors.add(gtsam.PriorFactorPose3(first, gtsam.Pose3(initial[first]), sigma))
@@ -180,20 +235,43 @@ def register_missions(
         raise RegistrationError(f"gtsam could not optimise the missions: {exc}") from None
     final = {key: result.atPose3(key).matrix() for key in initial}
     kept = [edge for index, edge in inter if weights[index] > 0.5]
-    frames = {}
-    for graph in incoming:
-        first_index = min(graph.vertices)
-        stored = pose_matrix(graph.vertices[first_index])
-        frames[graph.name] = matrix_pose(
-            final[_key(position, (graph.name, first_index))] @ invert(stored)
-        )
-    return Registration(
-        reference.name,
+    firsts = {g.name: _key(position, (g.name, min(g.vertices))) for g in graphs}
+    frames, fitted = {}, {}
+    for graph in graphs:
+        stored = pose_matrix(graph.vertices[min(graph.vertices)])
+        frames[graph.name] = matrix_pose(final[firsts[graph.name]] @ invert(stored))
+        keys = [_key(position, (graph.name, i)) for i in graph.vertices]
+        before = np.array([p[:3] for p in graph.vertices.values()])
+        after = np.array([final[k][:3, 3] for k in keys])
+        fitted[graph.name] = matrix_pose(rigid_fit(before, after))
+    covariances = {}
+    if covariance:
+        outliers = {index for index, _ in inter if weights[index] <= 0.5}
+        trusted = gtsam.NonlinearFactorGraph()
+        for index in range(factors.size()):
+            if index not in outliers:
+                trusted.add(factors.at(index))
+        try:
+            marginals = gtsam.Marginals(trusted, result)
+            covariances = {
+                name: marginals.marginalCovariance(key)[np.ix_(_OUR_AXES, _OUR_AXES)]
+                for name, key in firsts.items()
+            }
+        except RuntimeError as exc:
+            raise RegistrationError(f"gtsam could not find the frames' covariance: {exc}") from None
+    pairs: dict[tuple[str, str], int] = {}
+    for edge in kept:
+        a, b = edge.source[0], edge.target[0]
+        pairs[(min(a, b), max(a, b))] = pairs.get((min(a, b), max(a, b)), 0) + 1
+    return Optimised(
         frames,
+        fitted,
+        covariances,
         len(inter),
         len(kept),
         _residual(kept, initial, position),
         _residual(kept, final, position),
+        pairs,
     )
 
 
@@ -209,7 +287,7 @@ def _check_names(graphs: Sequence[MissionGraph]) -> None:
         raise UsageError(f"missions without vertices cannot be registered: {', '.join(empty)}")
 
 
-def _edges_among(graphs: Sequence[MissionGraph]) -> list[GraphEdge]:
+def edges_among(graphs: Sequence[MissionGraph]) -> list[GraphEdge]:
     """Every edge whose two ends lie in these missions, in a canonical order."""
     vertices = {g.name: g.vertices for g in graphs}
     edges = []
@@ -231,8 +309,12 @@ def _key(position: dict[str, int], vertex: VertexKey) -> int:
     return (position[vertex[0]] << 32) | vertex[1]
 
 
-def _joins(edge: GraphEdge, a: MissionGraph, b: MissionGraph) -> bool:
-    return {edge.source[0], edge.target[0]} == {a.name, b.name}
+def links_between(
+    edges: Sequence[GraphEdge], reference: MissionGraph, graph: MissionGraph
+) -> list[Link]:
+    """The edges between `reference` and `graph`, each seen from the reference's end."""
+    pair = {reference.name, graph.name}
+    return [_link(e, reference, graph) for e in edges if {e.source[0], e.target[0]} == pair]
 
 
 def _link(edge: GraphEdge, reference: MissionGraph, graph: MissionGraph) -> Link:

@@ -17,12 +17,13 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin
 from mapapi.maps.se3 import Pose
 
-MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS = (
+MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS, FRAMES = (
     "missions",
     "vertices",
     "edges",
     "landmarks",
     "pointclouds",
+    "frames",
 )
 
 Mission = maps_pb2.Mission
@@ -34,9 +35,16 @@ PointCloudBlock = maps_pb2.PointCloudBlock
 Box3 = maps_pb2.Box3
 Pose3 = maps_pb2.Pose3
 OriginPb = maps_pb2.Origin
+Frame = maps_pb2.Frame
 
-# table name -> payload class, for the tables a graph (or a cloud) import writes
-GRAPH_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, VERTICES: Vertex, EDGES: Edge}
+# table name -> payload class, for the tables a graph (or a cloud) import writes; a
+# graph's import makes its (empty) frames chunk, where `mapctl align` writes
+GRAPH_TABLES: dict[str, type[Message]] = {
+    MISSIONS: Mission,
+    VERTICES: Vertex,
+    EDGES: Edge,
+    FRAMES: Frame,
+}
 CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
 LASER_TABLES: dict[str, type[Message]] = {**GRAPH_TABLES, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {

@@ -90,7 +90,7 @@ async def mission_names(tx: Transaction) -> set[str]:
     return {str(getattr(m, "name", "")) for m in (await tx.items(MISSIONS)).values()}
 
 
-def _rows_of(peer: Peer, time: int, table: str, mission: str) -> list[Any]:
+def rows_of(peer: Peer, time: int, table: str, mission: str) -> list[Any]:
     """The mission's rows of `table` visible at `time`, decoded, by id."""
     if table not in peer.store.tables():
         return []
@@ -119,7 +119,7 @@ async def read_time(
 
 
 def _mission_row(peer: Peer, time: int, mission: str) -> Any:
-    found = _rows_of(peer, time, MISSIONS, mission)
+    found = rows_of(peer, time, MISSIONS, mission)
     if not found:
         raise MapImportError(
             f"no mission {mission!r} here; `mapctl missions` lists them, "
@@ -202,7 +202,7 @@ def cloud_at(peer: Peer, time: int, mission: str) -> PointCloud:
         MapImportError: no such mission.
     """
     row = _mission_row(peer, time, mission)
-    blocks = _rows_of(peer, time, CLOUDS, mission)
+    blocks = rows_of(peer, time, CLOUDS, mission)
     return cloud_from_blocks(mission, row.robot, row.frame, blocks)
 
 
@@ -260,7 +260,7 @@ def _parts_of(row: Any) -> MissionParts:
 
 
 def _mission_rows(peer: Peer, time: int, names: list[str]) -> list[Any]:
-    return [row for name in names for row in _rows_of(peer, time, MISSIONS, name)]
+    return [row for name in names for row in rows_of(peer, time, MISSIONS, name)]
 
 
 async def list_missions(peer: Peer) -> list[MissionInfo]:
@@ -283,8 +283,10 @@ def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
     for revision in rows:
         row: Any = decode(revision.data)
         box = box_from_pb(row.bbox) if row.HasField("bbox") else None
-        tiles = _parts_of(row).tiles
-        infos[row.name] = MissionInfo(row.name, row.robot, row.frame, box, tiles=tiles)
+        parts = _parts_of(row)  # the chunks its row names: a frames chunk has no rows yet
+        infos[row.name] = MissionInfo(
+            row.name, row.robot, row.frame, box, chunks=dict(parts.chunks), tiles=parts.tiles
+        )
         infos[row.name].chunks[MISSIONS] = revision.chunk_id
     boxes: dict[str, list[BBox]] = {}
     for summary in peer.label_summaries(MAP_LABELS):

@@ -11,7 +11,7 @@ processes working on one view cannot lose each other's staged changes.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 
 from mapapi.core import codec
@@ -148,6 +148,14 @@ class Workspace:
                 tx.update(table, item_id, message)
             view.changes = tx.changes
         return item_id
+
+    def stage(self, name: str, write: Callable[[Transaction], None]) -> None:
+        """Stage in view `name` (opened if need be) what `write` buffers in the
+        view's transaction: a program's edit of several items at once."""
+        with self._editing(name) as view:
+            tx = self.transaction(view)
+            write(tx)
+            view.changes = tx.changes
 
     def _default_chunk(self, table: str) -> ChunkId:
         chunks = self.peer.chunks(table)

@@ -93,6 +93,18 @@ def import_map(
     render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
 
 
+def _frame_option(what: str) -> Any:
+    """`--frame mission|world`: the frame to give a graph's poses in."""
+    return click.option(
+        "--frame",
+        type=click.Choice(["mission", "world"]),
+        default="mission",
+        show_default=True,
+        help=f"{what} in each mission's own frame, or in the shared world frame "
+        "(`mapctl align` places missions there).",
+    )
+
+
 def _output_option(text: str) -> Any:
     """`-o/--output FILE`, required."""
     return click.option(
@@ -112,17 +124,19 @@ def _output_option(text: str) -> Any:
     type=click.Choice(EXPORT_FORMATS),
     help="The format to write (default: by the extension; needed for .txt).",
 )
+@_frame_option("Write a graph's poses")
 @json_option
 @pass_session
 def export_map(
-    session: Session, mission: str, output: Path, fmt: str | None, as_json: bool
+    session: Session, mission: str, output: Path, fmt: str | None, frame: str, as_json: bool
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
-    its poses as a TUM or KITTI trajectory (in the mission's frame), a point
-    cloud as binary PLY (or PCD)."""
+    its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD)."""
     from mapctl import render
 
-    info = session.call("export_map", mission=mission, path=str(output.resolve()), fmt=fmt)
+    info = session.call(
+        "export_map", mission=mission, path=str(output.resolve()), fmt=fmt, frame=frame
+    )
     if as_json:
         render.emit_json(info)
         return
@@ -193,6 +207,7 @@ def missions(session: Session, swarm: bool, as_json: bool) -> None:
 )
 @click.option("--zoom", is_flag=True, help="Show the --bbox box and its surroundings only.")
 @click.option("--title", help="The picture's title (default: the axis it looks down).")
+@_frame_option("Draw the trajectories")
 @_output_option("The PNG to write.")
 @json_option
 @pass_session
@@ -203,6 +218,7 @@ def plot(
     up: str,
     zoom: bool,
     title: str | None,
+    frame: str,
     output: Path,
     as_json: bool,
 ) -> None:
@@ -223,6 +239,7 @@ def plot(
         up=up,
         zoom=zoom,
         title=title,
+        frame=frame,
     )
     if as_json:
         render.emit_json(info)

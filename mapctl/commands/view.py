@@ -185,21 +185,29 @@ def rm(session: Session, table_name: str, item: str) -> None:
     render.line(f"staged removal of {info['id']}")
 
 
+def call_committing(session: Session, as_json: bool, name: str, **args: Any) -> Any:
+    """Run operation `name`, which commits the session's view; on a conflict, print
+    the view's conflicts first with `as_json` (exit 3 follows, as for `commit`)."""
+    from mapapi import ConflictError
+    from mapctl import render
+
+    try:
+        return session.call(name, view=session.view, **args)
+    except ConflictError:
+        if as_json:
+            render.emit_json({"conflicts": session.call("diff", view=session.view)["conflicts"]})
+        raise
+
+
 @click.command("commit")
 @click.option("-m", "--message", default="", help="The commit message.")
 @json_option
 @pass_session
 def commit(session: Session, message: str, as_json: bool) -> None:
     """Commit the view's staged changes. Exits 3 on conflict; the conflicts stay in the view."""
-    from mapapi import ConflictError
     from mapctl import render
 
-    try:
-        info = session.call("commit", view=session.view, message=message)
-    except ConflictError:
-        if as_json:
-            render.emit_json({"conflicts": session.call("diff", view=session.view)["conflicts"]})
-        raise
+    info = call_committing(session, as_json, "commit", message=message)
     if as_json:
         render.emit_json(info)
     elif info["commit"] is not None:

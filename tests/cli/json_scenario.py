@@ -111,6 +111,7 @@ def _maps(out: Outputs, repo: Path, root: Path) -> None:
     out.run(("ls",), "vertices", repo=repo)  # vertex 0 has index 0: present, an int
     out.run(("export",), "intel", "-o", str(root / "intel.g2o"), repo=repo)
     out.run(("plot",), "-o", str(root / "map.png"), repo=repo)
+    out.run(("align",), repo=repo)  # one mission: the world is its frame
 
 
 def run_secure(out: Outputs, root: Path) -> None:

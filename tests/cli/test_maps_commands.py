@@ -39,7 +39,7 @@ class TestImport:
             "edges": 2_512,
             "points": 0,
         }
-        assert set(mission["chunks"]) == {"missions"}  # the graph is in tiles
+        assert set(mission["chunks"]) == {"missions", "frames"}  # the graph is in tiles
         assert [t["vertex_count"] for t in mission["tiles"]] == [432] * 4
         assert sum(t["edge_count"] for t in mission["tiles"]) == 2_512
         held = {c["id"]: c["items"] for c in mapctl.json("chunk", "list")["chunks"]}
@@ -66,7 +66,7 @@ class TestImport:
             671,
             info["points"],
         )
-        assert set(mission["chunks"]) == {"missions", "pointclouds"}
+        assert set(mission["chunks"]) == {"missions", "frames", "pointclouds"}
         (listed,) = mapctl.json("missions")["missions"]
         assert (listed["kind"], listed["edges"], listed["points"]) == ("graph", 670, info["points"])
         broken = tmp_path / "broken.clf"
@@ -203,6 +203,7 @@ class TestPlot:
         out = tmp_path / "map.png"
         info = intel.json("plot", "--bbox", "-5", "-10", "-1", "5", "0", "1", "-o", str(out))
         assert info == {
+            "frame": "mission",
             "path": str(out),
             "renderer": "matplotlib",
             "up": "z",

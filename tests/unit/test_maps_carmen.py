@@ -152,7 +152,7 @@ class TestImport:
 
         assert (result.vertices, result.edges) == (SCANS, SCANS - 1)
         assert result.points == laser.point_count()
-        assert set(result.chunks) == {"missions", CLOUDS}
+        assert set(result.chunks) == {"missions", "frames", CLOUDS}
         blocks = list((await _items(peer, CLOUDS)).values())
         assert len(blocks) == len(laser.scans)
         for block in blocks:

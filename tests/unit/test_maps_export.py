@@ -97,6 +97,7 @@ class TestG2oRoundTrip:
         info = await ops.export_map("intel", str(out))
 
         assert info == {
+            "frame": "mission",
             "mission": "intel",
             "path": str(out),
             "format": "g2o",

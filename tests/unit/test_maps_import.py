@@ -10,6 +10,7 @@ from mapapi import Peer
 from mapapi.lookup.spatial import BBox
 from mapapi.maps import (
     EDGES,
+    FRAMES,
     MISSIONS,
     VERTICES,
     EdgeKind,
@@ -114,7 +115,8 @@ class TestImportGraph:
         named = await mission_parts(peer, ["intel", "robot3", "nope"])
 
         assert set(named) == {"intel", "robot3"}
-        assert named["intel"].chunks == intel.chunks == {MISSIONS: intel.chunks[MISSIONS]}
+        assert named["intel"].chunks == intel.chunks
+        assert set(intel.chunks) == {MISSIONS, FRAMES}  # the graph is in tiles
         assert named["intel"].tiles == intel.tiles
         assert named["robot3"].tiles == tunnels[3].tiles
         every = {c.id for c in peer.chunks()}
@@ -131,7 +133,8 @@ class TestImportGraph:
         assert parts.in_box(first.bbox) >= {garage.chunks[MISSIONS], *first.chunks()}
         inside = BBox(*first.bbox.mins, *first.bbox.mins)  # a corner of the first tile only
         assert not any(t.bbox.overlaps(inside) for t in others)
-        assert parts.in_box(inside) == {garage.chunks[MISSIONS], *first.chunks()}
+        # the mission's row and frames, and the one tile
+        assert parts.in_box(inside) == {*garage.chunks.values(), *first.chunks()}
         # a tile the index found in the box (a vertex moved there) comes with its edges
         moved = others[0]
         assert set(moved.chunks()) <= parts.in_box(inside, {moved.vertices})

@@ -17,7 +17,7 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps import EDGES, MISSIONS, VERTICES, import_graph, list_missions, read_g2o
 from mapapi.maps.labels import MAP_LABELS
 from mapapi.maps.operations import MapOperations
-from mapapi.maps.schema import Vertex, pose_to_pb
+from mapapi.maps.schema import FRAMES, Vertex, pose_to_pb
 from mapapi.maps.se3 import IDENTITY
 from mapapi.store.labels import summarise
 
@@ -83,7 +83,7 @@ async def test_the_listing_reads_one_row_per_mission_and_the_summaries(
     assert intel.bbox == other.bbox
     assert intel.bbox is not None
     assert (intel.bbox.xmin, intel.bbox.ymin) < (-9.4, -22.4)
-    assert set(intel.chunks) == {MISSIONS}  # its vertices and edges are in tiles
+    assert set(intel.chunks) == {MISSIONS, FRAMES}  # its vertices and edges are in tiles
     assert [t.vertex_count for t in intel.tiles] == [432] * 4
     chunks_of = [{*i.chunks.values(), *(c for t in i.tiles for c in t.chunks())} for i in infos]
     assert not chunks_of[0] & chunks_of[1]

@@ -57,6 +57,7 @@ class TestEvoReadsWhatWeWrite:
         info = await ops.export_map(stored.name, str(out))
 
         assert info == {
+            "frame": "mission",
             "mission": stored.name,
             "path": str(out),
             "format": "tum",

@@ -177,3 +177,25 @@ class PointCloudBlock(_message.Message):
     compressed: bool
     vertex: int
     def __init__(self, mission: _Optional[str] = ..., points: _Optional[bytes] = ..., count: _Optional[int] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., compressed: _Optional[bool] = ..., vertex: _Optional[int] = ...) -> None: ...
+
+class Frame(_message.Message):
+    __slots__ = ("mission", "frame", "transform", "covariance", "anchor", "linked", "edges", "duplicate_of", "content")
+    MISSION_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    TRANSFORM_FIELD_NUMBER: _ClassVar[int]
+    COVARIANCE_FIELD_NUMBER: _ClassVar[int]
+    ANCHOR_FIELD_NUMBER: _ClassVar[int]
+    LINKED_FIELD_NUMBER: _ClassVar[int]
+    EDGES_FIELD_NUMBER: _ClassVar[int]
+    DUPLICATE_OF_FIELD_NUMBER: _ClassVar[int]
+    CONTENT_FIELD_NUMBER: _ClassVar[int]
+    mission: str
+    frame: str
+    transform: Pose3
+    covariance: _containers.RepeatedScalarFieldContainer[float]
+    anchor: str
+    linked: _containers.RepeatedScalarFieldContainer[str]
+    edges: int
+    duplicate_of: str
+    content: str
+    def __init__(self, mission: _Optional[str] = ..., frame: _Optional[str] = ..., transform: _Optional[_Union[Pose3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., anchor: _Optional[str] = ..., linked: _Optional[_Iterable[str]] = ..., edges: _Optional[int] = ..., duplicate_of: _Optional[str] = ..., content: _Optional[str] = ...) -> None: ...
