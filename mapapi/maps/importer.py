@@ -2,7 +2,9 @@
 
 A pose graph gets a chunk for its mission row and, per spatial tile
 (`mapapi.maps.tiles`), a chunk of the tile's vertices and one of its edges (none
-for a tile without edges); the mission row lists the tiles. A point cloud gets
+for a tile without edges); the mission row lists the tiles. Its landmarks, if
+any, get one chunk (not tiled: a landmark map is small next to its poses), which
+the mission row names; a landmark observation is an edge of its pose's tile. A point cloud gets
 one chunk for its mission row and one of point-cloud blocks. Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
@@ -24,14 +26,16 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
-from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, vertex_rows
+from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, landmark_rows, vertex_rows
 from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
     EDGES,
     GRAPH_TABLES,
+    LANDMARKS,
     MISSIONS,
     VERTICES,
+    Landmark,
     Mission,
     mission_to_pb,
 )
@@ -72,10 +76,11 @@ class ImportResult:
     points: int = 0
     commit_seconds: float = 0.0  # of the import's time, what the commit itself took
     tiles: tuple[TileChunks, ...] = ()
+    landmarks: int = 0
 
     def elements(self) -> int:
-        """Vertices plus edges: the unit of the import speed target."""
-        return self.vertices + self.edges
+        """Vertices, landmarks and edges: the unit of the import speed target."""
+        return self.vertices + self.landmarks + self.edges
 
     def all_chunks(self) -> list[ChunkId]:
         """Every chunk the import created."""
@@ -155,14 +160,19 @@ def _prepare(source: MapSource) -> _Prepared:
     check_graph(source)
     tiles = tile_graph(source)
     summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"
-    parts = []
+    parts, tables = [], GRAPH_TABLES
+    if source.landmarks:
+        # the table only when needed: a repository may use the name for its own table
+        tables = {**GRAPH_TABLES, LANDMARKS: Landmark}
+        parts.append(_Part(LANDMARKS, len(source.landmarks), partial(landmark_rows, source)))
+        summary += f", {len(source.landmarks)} landmarks"
     for tile in tiles:
         vertices = partial(vertex_rows, source, tile.vertices)
         parts.append(_Part(VERTICES, len(tile.vertices), vertices, tile))
         if tile.edges:
             edges = partial(edge_rows, source, tile.edges)
             parts.append(_Part(EDGES, len(tile.edges), edges, tile))
-    return _Prepared(source, mission_to_pb(source), parts, GRAPH_TABLES, summary)
+    return _Prepared(source, mission_to_pb(source), parts, tables, summary)
 
 
 async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) -> ImportResult:
@@ -170,9 +180,10 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
     written = await _commit_rows(peer, prepared, progress)
     log.info("imported mission %s (%s)", source.name, prepared.summary)
     if isinstance(source, PointCloud):
-        vertices, edges, points = 0, 0, len(source.points)
+        vertices, edges, points, landmarks = 0, 0, len(source.points), 0
     else:
         vertices, edges, points = len(source.vertices), len(source.edges), 0
+        landmarks = len(source.landmarks)
     return ImportResult(
         source.name,
         source.robot,
@@ -184,6 +195,7 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
         points,
         written.seconds,
         written.tiles,
+        landmarks,
     )
 
 

@@ -65,7 +65,12 @@ def export_mission(peer: Peer, time: int, mission: str, target: Path) -> dict[st
         written = _write_graph(graph, target)
         # edges to other missions' vertices have no place in a one-mission g2o file
         left_out = len(graph.edges) - written
-        return {"vertices": len(graph.vertices), "edges": written, "left_out": left_out}
+        return {
+            "vertices": len(graph.vertices),
+            "landmarks": len(graph.landmarks),
+            "edges": written,
+            "left_out": left_out,
+        }
     cloud = cloud_at(peer, time, mission)
     if len(cloud.points) == 0:
         raise UsageError(f"mission {mission!r} has no point cloud; export it as .g2o")

@@ -9,7 +9,13 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "ply", "pcd")  # mapapi.maps.source.FORMATS, kept import-free
+FORMATS = (
+    "g2o",
+    "kimera-csv",
+    "gtsam-landmarks",
+    "ply",
+    "pcd",
+)  # mapapi.maps.source.FORMATS, kept import-free
 
 
 def _bbox_text(box: list[float] | None) -> str:
@@ -21,7 +27,8 @@ def _size_text(mission: dict[str, Any]) -> str:
         return "?"  # held elsewhere: only its box is known here
     if mission["points"]:
         return f"{mission['points']} points"
-    return f"{mission['vertices']} v + {mission['edges']} e"
+    size = f"{mission['vertices']} v + {mission['edges']} e"
+    return size + (f" + {mission['landmarks']} lm" if mission.get("landmarks") else "")
 
 
 def _holders_text(holders: list[dict[str, Any]]) -> str:
@@ -34,10 +41,13 @@ def _holders_text(holders: list[dict[str, Any]]) -> str:
     "--format",
     "fmt",
     type=click.Choice(FORMATS),
-    help="The file's format (default: by extension; a folder is a Kimera set).",
+    help="The file's format (default: by extension; a folder is a DGS set of <n>.g2o "
+    "files or a Kimera set; a .txt file GTSAM landmark text if its first record is one).",
 )
 @click.option(
-    "--mission", help="The mission's name (default: the file's); a prefix for a Kimera set."
+    "--mission",
+    help="The mission's name (default: the file's); a prefix for a Kimera set or for "
+    "per-robot g2o (default robot-).",
 )
 @click.option("--robot", help="The robot's name (sources of one mission only).")
 @click.option(
@@ -57,7 +67,8 @@ def import_map(
     voxel: float | None,
     as_json: bool,
 ) -> None:
-    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud.
+    """Import a map FILE: g2o pose graph (one mission per robot when its ids are
+    GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD cloud.
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -109,6 +120,8 @@ def export_map(session: Session, mission: str, output: Path, as_json: bool) -> N
         return
     if info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
+        if info.get("landmarks"):
+            what += f", {info['landmarks']} landmarks"
         if info["left_out"]:
             what += f" ({info['left_out']} edges to other missions left out)"
     else:
