@@ -34,6 +34,8 @@ DATASETS = {
     "intel": "pose_graphs/intel.g2o",
     "parking-garage": "pose_graphs/parking-garage.g2o",
     "tunnels": "kimera_multi_tunnels_8robots",
+    "victoria-park": "landmarks/victoria_park.txt",
+    "dgs-blocks": "dgs_blocks_world_4robots_SIMULATED",
 }
 """The graph data sets `measure_import` knows: name -> path under `SAMPLES`."""
 

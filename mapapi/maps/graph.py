@@ -1,8 +1,10 @@
 """The in-memory pose graph the parsers build and `import_graph` stores.
 
-A `MissionGraph` is one robot's session: its vertices (index -> pose) and the
-edges it owns. An edge's ends are `(mission, index)` pairs, so an inter-robot
-edge names a vertex of another mission.
+A `MissionGraph` is one robot's session: its vertices (index -> pose), its
+landmarks (index -> position, an index space of their own) and the edges it
+owns. An edge's ends are `(mission, index)` pairs, so an inter-robot edge names
+a vertex of another mission; a landmark observation (`EdgeKind.LANDMARK`) goes
+from a vertex to a landmark.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from mapapi.maps.se3 import IDENTITY, Pose, compose
 log = logging.getLogger(__name__)
 
 VertexKey = tuple[str, int]  # (mission, index)
+Point = tuple[float, float, float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,7 +34,7 @@ class Origin:
         text: the record's g2o text as read, without the line break ("" if none,
             or when `digits` give it back).
         digits: the decimals of each number of that text, when the text is its
-            tag and the row's values written with them (`g2o.lean_origin`).
+            tag and the row's values written with them (`g2o_records.lean_origin`).
     """
 
     line: int = 0
@@ -48,15 +51,18 @@ class EdgeKind(Enum):
     ODOMETRY = 1
     LOOP = 2
     INTER_ROBOT = 3
+    LANDMARK = 4
 
 
 @dataclass(frozen=True, slots=True)
 class GraphEdge:
-    """A relative pose measurement `source -> target`, in the source's frame.
+    """A relative pose measurement `source -> target`, in the source's frame;
+    for a `LANDMARK` edge, the position of the landmark `target` (its rotation
+    is the identity).
 
     Attributes:
         information: the 21-value upper triangle of the 6x6 information matrix,
-            row-major over (x, y, z, rx, ry, rz).
+            row-major over (x, y, z, rx, ry, rz) (a landmark's: on x, y, z only).
     """
 
     source: VertexKey
@@ -81,6 +87,8 @@ class MissionGraph:
         origins: vertex index -> where the import read it (absent: nowhere).
         timestamps: vertex index -> when the pose was taken, in seconds (absent:
             the source has no time, as g2o and Kimera CSV files have not).
+        landmarks: landmark index -> position (initial estimate).
+        landmark_origins: landmark index -> where the import read it.
     """
 
     name: str
@@ -91,12 +99,15 @@ class MissionGraph:
     planar: bool = False
     origins: dict[int, Origin] = field(default_factory=dict)
     timestamps: dict[int, float] = field(default_factory=dict)
+    landmarks: dict[int, Point] = field(default_factory=dict)
+    landmark_origins: dict[int, Origin] = field(default_factory=dict)
 
     def bbox(self) -> BBox | None:
-        """The box around the vertex positions (None without vertices)."""
+        """The box around the vertex and landmark positions (None without vertices)."""
         if not self.vertices:
             return None
-        xs, ys, zs = zip(*((p[0], p[1], p[2]) for p in self.vertices.values()), strict=True)
+        points = [p[:3] for p in self.vertices.values()] + list(self.landmarks.values())
+        xs, ys, zs = zip(*points, strict=True)
         return BBox(min(xs), min(ys), min(zs), max(xs), max(ys), max(zs))
 
     def count(self, kind: EdgeKind) -> int:
@@ -104,8 +115,35 @@ class MissionGraph:
         return sum(1 for e in self.edges if e.kind is kind)
 
     def elements(self) -> int:
-        """Vertices plus edges: the unit of the import speed target."""
-        return len(self.vertices) + len(self.edges)
+        """Vertices, landmarks and edges: the unit of the import speed target."""
+        return len(self.vertices) + len(self.landmarks) + len(self.edges)
+
+
+def place_landmarks(graph: MissionGraph) -> int:
+    """Give every landmark an observation names but the source did not place a
+    position: where its first observation (in edge order) puts it, seen from
+    that observation's pose (a range-bearing or relative-position file holds no
+    landmark positions; a solver refines this start). Returns how many were placed.
+
+    Raises:
+        MapImportError: an observation's pose is not a vertex of the mission.
+    """
+    placed = 0
+    for edge in graph.edges:
+        index = edge.target[1]
+        if edge.kind is not EdgeKind.LANDMARK or index in graph.landmarks:
+            continue
+        pose = graph.vertices.get(edge.source[1]) if edge.source[0] == graph.name else None
+        if pose is None:
+            raise MapImportError(
+                f"landmark {index} is observed from {edge.source}, which is not a pose here",
+                source=graph.name,
+                line=edge.origin.line,
+            )
+        x, y, z = compose(pose, edge.relative)[:3]
+        graph.landmarks[index] = (x, y, z)
+        placed += 1
+    return placed
 
 
 def chain_odometry(graph: MissionGraph, wanted: Iterable[int]) -> int:

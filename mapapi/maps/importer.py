@@ -3,9 +3,12 @@
 A pose graph gets a chunk for its mission row, one for its frames (empty until
 `mapctl align`) and, per spatial tile (`mapapi.maps.tiles`), a chunk of the
 tile's vertices and one of its edges (none for a tile without edges); the
-mission row lists them. A point cloud gets one chunk for its mission row and one
-of point-cloud blocks; a laser mission (`mapapi.maps.laser`), a graph's chunks
-and one of its scans' blocks. Everything is built
+mission row lists them. Its landmarks, if any, get one chunk (not tiled: a
+landmark map is small next to its poses), which the mission row names; a
+landmark observation is an edge of its pose's tile. A point cloud gets one
+chunk for its mission row and one of point-cloud blocks; a laser mission
+(`mapapi.maps.laser`), a graph's chunks and one of its scans' blocks.
+Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
 checks every name of a set before the first commit, so a clash stops the set
@@ -27,16 +30,18 @@ from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
 from mapapi.maps.laser import LaserMission, scan_blocks
-from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, vertex_rows
+from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, landmark_rows, vertex_rows
 from mapapi.maps.schema import (
     CLOUD_TABLES,
     CLOUDS,
     EDGES,
     FRAMES,
     GRAPH_TABLES,
+    LANDMARKS,
     LASER_TABLES,
     MISSIONS,
     VERTICES,
+    Landmark,
     Mission,
     mission_to_pb,
 )
@@ -77,10 +82,11 @@ class ImportResult:
     points: int = 0
     commit_seconds: float = 0.0  # of the import's time, what the commit itself took
     tiles: tuple[TileChunks, ...] = ()
+    landmarks: int = 0
 
     def elements(self) -> int:
-        """Vertices plus edges: the unit of the import speed target."""
-        return self.vertices + self.edges
+        """Vertices, landmarks and edges: the unit of the import speed target."""
+        return self.vertices + self.landmarks + self.edges
 
     def all_chunks(self) -> list[ChunkId]:
         """Every chunk the import created."""
@@ -163,18 +169,22 @@ def _prepare(source: MapSource) -> _Prepared:
     # The chunk of the mission's place in shared frames (`mapctl align`), made with
     # the mission so every aligner writes that one chunk: two alignments then
     # conflict on its rows, where chunks made by each would split it in two.
-    parts = [_Part(FRAMES, 0, list)]
+    parts, tables = [_Part(FRAMES, 0, list)], GRAPH_TABLES
+    if source.landmarks:
+        # the table only when needed: a repository may use the name for its own table
+        tables = {**GRAPH_TABLES, LANDMARKS: Landmark}
+        parts.append(_Part(LANDMARKS, len(source.landmarks), partial(landmark_rows, source)))
+        summary += f", {len(source.landmarks)} landmarks"
     for tile in tiles:
         vertices = partial(vertex_rows, source, tile.vertices)
         parts.append(_Part(VERTICES, len(tile.vertices), vertices, tile))
         if tile.edges:
             edges = partial(edge_rows, source, tile.edges)
             parts.append(_Part(EDGES, len(tile.edges), edges, tile))
-    tables = GRAPH_TABLES
     if isinstance(source, LaserMission) and source.scans:
         # a scan is a block of its own, all in one chunk as a cloud's blocks are
         parts.append(_Part(CLOUDS, len(source.scans), partial(scan_blocks, source)))
-        tables = LASER_TABLES
+        tables = {**tables, **LASER_TABLES}
         summary += f", {len(source.scans)} scans of {source.point_count()} points"
     return _Prepared(source, mission_to_pb(source), parts, tables, summary)
 
@@ -184,10 +194,11 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
     written = await _commit_rows(peer, prepared, progress)
     log.info("imported mission %s (%s)", source.name, prepared.summary)
     if isinstance(source, PointCloud):
-        vertices, edges, points = 0, 0, len(source.points)
+        vertices, edges, points, landmarks = 0, 0, len(source.points), 0
     else:
         vertices, edges = len(source.vertices), len(source.edges)
         points = source.point_count() if isinstance(source, LaserMission) else 0
+        landmarks = len(source.landmarks)
     return ImportResult(
         source.name,
         source.robot,
@@ -199,6 +210,7 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
         points,
         written.seconds,
         written.tiles,
+        landmarks,
     )
 
 

@@ -118,7 +118,12 @@ def export_mission(
         written = _write_graph(graph, target)
         # edges to other missions' vertices have no place in a one-mission g2o file
         left_out = len(graph.edges) - written
-        return {"vertices": len(graph.vertices), "edges": written, "left_out": left_out}
+        return {
+            "vertices": len(graph.vertices),
+            "landmarks": len(graph.landmarks),
+            "edges": written,
+            "left_out": left_out,
+        }
     trajectory = trajectory_of(graph)
     write = write_tum if fmt == "tum" else write_kitti
     with target.open("w", encoding="ascii") as out:

@@ -5,7 +5,8 @@ Each row is a relative SE(3) measurement between two (robot, pose) vertices
 trajectory comes from chaining its odometry (`pose_dst == pose_src + 1`, same
 robot). Intra-robot loops stay loops; an inter-robot edge is owned by the
 source robot's mission and kept once although both robots' files list it
-(the first row read wins; the copies differ at most in `weight`).
+(the first row read wins; the copies differ at most in `weight`): the rules of
+every multi-robot set, `mapapi.maps.robots`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph, Origin, chain_odometry
+from mapapi.maps.graph import MissionGraph, Origin
+from mapapi.maps.robots import RobotMissions
 from mapapi.maps.se3 import isotropic_information
 
 Progress = Callable[[int, int], None]  # (rows read, 0 while the total is unknown)
@@ -53,21 +55,14 @@ class KimeraReader:
         self.prefix = prefix
         self.progress = progress
         self.rows = 0
-        self._graphs: dict[int, MissionGraph] = {}
-        self._wanted: dict[int, set[int]] = {}
-        self._seen: set[tuple[int, int, int, int]] = set()
+        self._missions = RobotMissions(self._naming)
 
     def mission(self, robot: int) -> str:
         """The mission name of a robot number."""
         return f"{self.prefix}robot{robot}"
 
-    def _graph(self, robot: int) -> MissionGraph:
-        graph = self._graphs.get(robot)
-        if graph is None:
-            name = self.mission(robot)
-            graph = self._graphs[robot] = MissionGraph(name, f"robot{robot}", f"{name}/odom")
-            self._wanted[robot] = set()
-        return graph
+    def _naming(self, robot: int) -> tuple[str, str]:
+        return self.mission(robot), f"robot{robot}"
 
     def read(self, lines: Iterable[str], source: str = "") -> None:
         """Read one file's text (its header line first).
@@ -101,37 +96,21 @@ class KimeraReader:
         self.rows += 1
         if self.progress is not None and self.rows % 10_000 == 0:
             self.progress(self.rows, 0)
-        key = (a, i, b, j)
-        if key in self._seen:
-            return  # an inter-robot edge already read from the other robot's file
-        self._seen.add(key)
-        if a == b:
-            kind = EdgeKind.ODOMETRY if j == i + 1 else EdgeKind.LOOP
-        else:
-            kind = EdgeKind.INTER_ROBOT
-        owner = self._graph(a)
-        self._graph(b)
-        self._wanted[a].add(i)
-        self._wanted[b].add(j)
-        owner.edges.append(
-            GraphEdge(
-                (self.mission(a), i),
-                (self.mission(b), j),
-                (tx, ty, tz, qx, qy, qz, qw),
-                isotropic_information(tau, kappa),
-                kind,
-                Origin(self.rows),  # its place among the rows read: the import order
-            )
+        # an inter-robot edge read from the other robot's file already is skipped
+        self._missions.add_edge(
+            (a, i, b, j),
+            (a, i),
+            (b, j),
+            (tx, ty, tz, qx, qy, qz, qw),
+            isotropic_information(tau, kappa),
+            Origin(self.rows),  # its place among the rows read: the import order
         )
 
     def graphs(self) -> list[MissionGraph]:
         """One mission per robot, by robot number, with chained trajectories."""
-        for robot, graph in self._graphs.items():
-            chain_odometry(graph, self._wanted[robot])
-            graph.vertices = dict(sorted(graph.vertices.items()))
         if self.progress is not None:
             self.progress(self.rows, self.rows)
-        return [self._graphs[r] for r in sorted(self._graphs)]
+        return self._missions.graphs()
 
 
 def read_kimera(

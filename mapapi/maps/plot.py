@@ -1,5 +1,5 @@
 """Top-down pictures of missions: trajectories, loop closures, inter-robot edges,
-point clouds and a query box, as a PNG.
+landmarks (small crosses), point clouds and a query box, as a PNG.
 
 The view looks down the "up" axis, by default the axis along which everything
 drawn is thinnest (z for the Intel and garage graphs and the room scan, y for
@@ -104,6 +104,7 @@ def _draw(
     for cloud in clouds:
         _scatter(ax, figure, cloud, u, v, up)
     _trajectories(ax, graphs, u, v, labels)
+    _landmarks(ax, graphs, u, v)
     if box is not None:
         _inside(ax, graphs, box, u, v)
         _box(ax, box, u, v)
@@ -176,13 +177,37 @@ def _trajectories(
         ax.plot([], [], color="black", linewidth=0.6, linestyle="--", label="inter-robot edges")
 
 
+def _landmarks(ax: Any, graphs: Sequence[MissionGraph], u: int, v: int) -> None:
+    """Each mission's landmarks as small crosses in its robot's colour, above
+    the trajectories (a landmark map has a few hundred; their observations
+    would hide the path, so they are not drawn)."""
+    colours = _colours(graphs)
+    drawn = False
+    for graph in graphs:
+        if graph.landmarks:
+            xy = np.array([(p[u], p[v]) for p in graph.landmarks.values()])
+            ax.scatter(
+                xy[:, 0],
+                xy[:, 1],
+                s=12,
+                marker="+",
+                linewidths=0.8,
+                color=colours[graph.name],
+                zorder=3,
+            )
+            drawn = True
+    if drawn:
+        ax.scatter([], [], s=12, marker="+", color="grey", label="landmarks")
+
+
 def _runs(graph: MissionGraph, u: int, v: int) -> list[Any]:
     """The trajectory's (u, v) points in index order, cut where indices skip more
     than their usual step: a mission held in part (the tiles in a box) is drawn
     as the pieces held, not joined by lines across what is missing."""
     indices = np.array(sorted(graph.vertices))
     xy = np.array([(graph.vertices[i][u], graph.vertices[i][v]) for i in indices])
-    steps = np.diff(indices)
+    # landmark ids may sit between poses' (Victoria Park: 4, landmark 5, 6): count them as steps
+    steps = np.diff(np.searchsorted(np.array(sorted({*graph.vertices, *graph.landmarks})), indices))
     if not len(steps):
         return [xy]
     return np.split(xy, np.nonzero(steps > steps.min())[0] + 1)

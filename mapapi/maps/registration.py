@@ -295,6 +295,8 @@ def edges_among(graphs: Sequence[MissionGraph]) -> list[GraphEdge]:
         for edge in graph.edges:
             if edge.source[0] not in vertices or edge.target[0] not in vertices:
                 continue  # an edge to a mission outside this registration
+            if edge.kind is EdgeKind.LANDMARK:
+                continue  # frames come from pose-to-pose edges; its end is no pose
             for mission, index in (edge.source, edge.target):
                 if index not in vertices[mission]:
                     raise UsageError(

@@ -9,14 +9,16 @@ from google.protobuf.message import Message
 
 from mapapi.maps.cloud import PointCloud, cloud_blocks
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.g2o import lean_edge, lean_vertex
-from mapapi.maps.graph import NO_ORIGIN, MissionGraph
+from mapapi.maps.g2o_records import lean_edge, lean_landmark, lean_vertex
+from mapapi.maps.graph import NO_ORIGIN, EdgeKind, MissionGraph
 from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
+    LANDMARKS,
     MISSIONS,
     VERTICES,
     edge_to_pb,
+    landmark_to_pb,
     mission_to_pb,
     vertex_to_pb,
 )
@@ -26,7 +28,8 @@ def check_graph(graph: MissionGraph) -> None:
     """Refuse a graph an import cannot store.
 
     Raises:
-        MapImportError: no name, no vertices, or an edge names a vertex the mission lacks.
+        MapImportError: no name, no vertices, an edge names a vertex the mission
+            lacks, or a landmark observation a landmark it lacks.
     """
     if not graph.name:
         raise MapImportError("a mission needs a name")
@@ -34,7 +37,12 @@ def check_graph(graph: MissionGraph) -> None:
         raise MapImportError("the graph has no vertices", source=graph.name)
     name = graph.name
     for edge in graph.edges:
-        for end in (edge.source, edge.target):
+        landmark = edge.kind is EdgeKind.LANDMARK
+        if landmark and (edge.target[0] != name or edge.target[1] not in graph.landmarks):
+            raise MapImportError(
+                f"an edge observes the missing landmark {edge.target}", source=name
+            )
+        for end in (edge.source,) if landmark else (edge.source, edge.target):
             if end[0] == name and end[1] not in graph.vertices:
                 raise MapImportError(f"an edge names the missing vertex {end[1]}", source=name)
 
@@ -49,6 +57,7 @@ def build_rows(graph: MissionGraph) -> dict[str, list[Message]]:
     return {
         MISSIONS: [mission_to_pb(graph)],
         VERTICES: vertex_rows(graph, list(graph.vertices)),
+        LANDMARKS: landmark_rows(graph),
         EDGES: edge_rows(graph, range(len(graph.edges))),
     }
 
@@ -79,6 +88,15 @@ def vertex_rows(graph: MissionGraph, indices: Sequence[int]) -> list[Message]:
             stamps.get(i, 0.0),
         )
         for i in indices
+    ]
+
+
+def landmark_rows(graph: MissionGraph) -> list[Message]:
+    """The rows of the mission's landmarks, with where the import read each."""
+    origins = graph.landmark_origins
+    return [
+        landmark_to_pb(graph.name, i, p, lean_landmark(i, p, origins.get(i, NO_ORIGIN)))
+        for i, p in graph.landmarks.items()
     ]
 
 

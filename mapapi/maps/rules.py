@@ -18,6 +18,8 @@ process reads each held chunk once on its first vertex or edge commit.
 
 What cannot be judged here is let through: an edge end in another mission no
 vertex of which this peer holds (an inter-robot edge to a robot not loaded).
+A landmark observation's end is a landmark, not a vertex: only its pose is
+checked.
 """
 
 from __future__ import annotations
@@ -49,10 +51,13 @@ def vertex_keys(data: bytes) -> tuple[Key, ...]:
 
 
 def edge_keys(data: bytes) -> tuple[Key, ...]:
-    """The vertices an edge payload ends at: (from, to)."""
+    """The vertices an edge payload ends at: (from, to); a landmark
+    observation's `to` names a landmark, so only (from,)."""
     if not data:
         return ()
-    return edge_ends(Edge.FromString(data))
+    edge = Edge.FromString(data)
+    ends = edge_ends(edge)
+    return ends[:1] if edge.kind == Edge.Kind.LANDMARK else ends
 
 
 class KeyIndex:

@@ -14,7 +14,7 @@ from google.protobuf.message import Message
 
 from mapapi._pb.mapapi.v1 import maps_pb2
 from mapapi.lookup.spatial import BBox
-from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin
+from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin, Point
 from mapapi.maps.se3 import Pose
 
 MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS, FRAMES = (
@@ -121,6 +121,20 @@ def vertex_to_pb(
         timestamp=timestamp,
         origin=origin_to_pb(origin),
     )
+
+
+def landmark_to_pb(
+    mission: str, index: int, point: Point, origin: Origin = NO_ORIGIN
+) -> maps_pb2.Landmark:
+    """One landmark row, with where an import read it."""
+    position = maps_pb2.Point3(x=point[0], y=point[1], z=point[2])
+    return Landmark(mission=mission, index=index, position=position, origin=origin_to_pb(origin))
+
+
+def landmark_from_pb(message: maps_pb2.Landmark) -> Point:
+    """A landmark row's position."""
+    p = message.position
+    return (p.x, p.y, p.z)
 
 
 INFORMATION_SIZE = 21

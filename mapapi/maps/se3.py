@@ -13,6 +13,8 @@ IDENTITY: Pose = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 # Rows/columns of the 6x6 information (x, y, z, rx, ry, rz) that an SE(2)
 # measurement (x, y, theta) occupies: theta is a rotation about z.
 _SE2_AXES = (0, 1, 5)
+# ... and that a 2D point observation (x, y) of a landmark occupies.
+XY_AXES = (0, 1)
 
 
 def upper_index(row: int, col: int, size: int = 6) -> int:
@@ -20,26 +22,53 @@ def upper_index(row: int, col: int, size: int = 6) -> int:
     return row * size - row * (row - 1) // 2 + (col - row)
 
 
-def lift_information(upper3: tuple[float, ...]) -> tuple[float, ...]:
-    """The 21-value 6x6 upper triangle of a 3x3 SE(2) information (6 values).
-
-    The entries land on (x, y, rz); z, rx and ry get zero information: a planar
-    graph says nothing about them.
+def lift_information(
+    upper: tuple[float, ...], axes: tuple[int, ...] = _SE2_AXES
+) -> tuple[float, ...]:
+    """The 21-value 6x6 upper triangle of a smaller information's upper
+    triangle over `axes`: by default a 3x3 SE(2) one (6 values), whose entries
+    land on (x, y, rz); `XY_AXES` for a 2D point's 2x2 (3 values). Other axes
+    get zero information: a planar graph says nothing about them.
     """
     out = [0.0] * 21
     k = 0
-    for i in range(3):
-        for j in range(i, 3):
-            out[upper_index(_SE2_AXES[i], _SE2_AXES[j])] = upper3[k]
+    for i in range(len(axes)):
+        for j in range(i, len(axes)):
+            out[upper_index(axes[i], axes[j])] = upper[k]
             k += 1
     return tuple(out)
 
 
-def project_information(upper6: tuple[float, ...]) -> tuple[float, ...]:
-    """Inverse of `lift_information`: the 3x3 (x, y, theta) block, 6 values."""
+def project_information(
+    upper6: tuple[float, ...], axes: tuple[int, ...] = _SE2_AXES
+) -> tuple[float, ...]:
+    """Inverse of `lift_information`: the block over `axes`, as an upper triangle."""
     return tuple(
-        upper6[upper_index(_SE2_AXES[i], _SE2_AXES[j])] for i in range(3) for j in range(i, 3)
+        upper6[upper_index(axes[i], axes[j])] for i in range(len(axes)) for j in range(i, len(axes))
     )
+
+
+def invert_upper(upper: tuple[float, ...], source: str = "", line: int = 0) -> tuple[float, ...]:
+    """The inverse of a symmetric 2x2 or 3x3 matrix given as its upper triangle
+    (3 or 6 values), as its upper triangle: a covariance's information.
+
+    Raises:
+        ValueError: the matrix is not positive definite.
+    """
+    if len(upper) == 3:
+        a, b, d = upper
+        det = a * d - b * b
+        if not (a > 0 and det > 0):
+            raise ValueError(f"covariance {upper} is not positive definite")
+        return (d / det, -b / det, a / det)
+    a, b, c, d, e, f = upper
+    # cofactors of [[a b c] [b d e] [c e f]]
+    m00, m01, m02 = d * f - e * e, c * e - b * f, b * e - c * d
+    det = a * m00 + b * m01 + c * m02
+    if not (a > 0 and a * d - b * b > 0 and det > 0):
+        raise ValueError(f"covariance {upper} is not positive definite")
+    m11, m12, m22 = a * f - c * c, b * c - a * e, a * d - b * b
+    return tuple(v / det for v in (m00, m01, m02, m11, m12, m22))
 
 
 def isotropic_information(tau: float, kappa: float) -> tuple[float, ...]:

@@ -1,10 +1,13 @@
 """Map files by format: which reader a file needs, and reading it as missions.
 
-Formats: `g2o` (one pose graph), `kimera-csv` (a folder of
-`robot*/measurements.csv`, one mission per robot, or one robot's CSV file),
+Formats: `g2o` (one pose graph, or one per robot when its ids are GTSAM
+`Symbol` keys, as in a DGS folder of `<n>.g2o` files: `mapapi.maps.dgs`),
+`kimera-csv` (a folder of `robot*/measurements.csv`, one mission per robot, or
+one robot's CSV file), `gtsam-landmarks` (GTSAM's ODOMETRY/LANDMARK text),
 `ply` and `pcd` (one point cloud), `carmen` (a laser log, `.clf` or `.clf.bz2`:
 a trajectory and its scans). The format follows from the extension (a folder
-is a Kimera set) unless given.
+is a DGS set when it holds `<n>.g2o` files, else a Kimera set; a `.txt` file is
+GTSAM landmark text when its first record says so) unless given.
 """
 
 from __future__ import annotations
@@ -13,32 +16,37 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mapapi.core.errors import UsageError
+from mapapi.maps import gtsam_text
 from mapapi.maps.carmen import read_carmen
 from mapapi.maps.cloud_file import CLOUD_FORMATS, DEFAULT_VOXEL, read_cloud
+from mapapi.maps.dgs import read_g2o_source, robot_files
 from mapapi.maps.errors import MapImportError
-from mapapi.maps.g2o import read_g2o
 from mapapi.maps.graph import EdgeKind, MissionGraph
 from mapapi.maps.importer import MapSource, rename
 from mapapi.maps.kimera import KimeraReader, read_kimera
+from mapapi.maps.text_file import read_text
 
 Progress = Callable[[int, int], None]  # (units read, units in all; 0 while unknown)
 
-FORMATS = ("g2o", "kimera-csv", *CLOUD_FORMATS, "carmen")
+FORMATS = ("g2o", "kimera-csv", gtsam_text.FORMAT, *CLOUD_FORMATS, "carmen")
 _BY_SUFFIX = {".g2o": "g2o", ".csv": "kimera-csv", ".ply": "ply", ".pcd": "pcd", ".clf": "carmen"}
 
 
 def detect_format(path: str | Path) -> str:
-    """The format of `path` by its extension (a folder is a Kimera set).
+    """The format of `path` by its extension (a folder is a DGS or Kimera set;
+    a `.txt` file GTSAM landmark text if its first record says so).
 
     Raises:
         UsageError: an extension no reader knows.
     """
     path = Path(path)
     if path.is_dir():
-        return "kimera-csv"
+        return "g2o" if robot_files(path) else "kimera-csv"
     if [s.lower() for s in path.suffixes[-2:]] == [".clf", ".bz2"]:
         return "carmen"  # the one reader that takes a compressed file: logs ship so
     fmt = _BY_SUFFIX.get(path.suffix.lower())
+    if fmt is None and path.suffix.lower() == ".txt" and gtsam_text.looks_like(path):
+        fmt = gtsam_text.FORMAT
     if fmt is None:
         raise UsageError(
             f"cannot tell the format of {path.name!r} from its extension; "
@@ -90,9 +98,12 @@ def read_source(
     if voxel is not None:
         raise UsageError("--voxel applies to point clouds (ply, pcd) only")
     if fmt == "g2o":
-        return [read_g2o(path, mission, robot or "", progress=progress)]
+        return list(read_g2o_source(path, mission, robot, progress))
     if fmt == "carmen":
         return [read_carmen(path, mission, robot or "", progress=progress)]
+    if fmt == gtsam_text.FORMAT:
+        parse = gtsam_text.parse_gtsam_landmarks
+        return [read_text(parse, path, mission, robot or "", progress)]
     graphs = _read_kimera(path, mission or "", progress)
     if robot is not None:
         if len(graphs) != 1:

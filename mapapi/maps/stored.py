@@ -29,10 +29,13 @@ from mapapi.maps.labels import MAP_LABELS
 from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
+    LANDMARKS,
     MISSIONS,
     VERTICES,
+    Landmark,
     box_from_pb,
     edge_from_pb,
+    landmark_from_pb,
     origin_from_pb,
     pose_from_pb,
 )
@@ -55,6 +58,7 @@ class MissionInfo:
             the tables not tiled (all of them for a mission imported before tiles).
         tiles: its graph's spatial tiles, as its row lists them.
         holders: the peers holding the mission row's chunk.
+        landmarks: how many of its landmarks are held here.
     """
 
     name: str
@@ -67,6 +71,7 @@ class MissionInfo:
     chunks: dict[str, ChunkId] = field(default_factory=dict)
     tiles: tuple[TileChunks, ...] = ()
     holders: list[PeerId] = field(default_factory=list)
+    landmarks: int = 0
 
     @property
     def kind(self) -> str:
@@ -98,7 +103,7 @@ def rows_of(peer: Peer, time: int, table: str, mission: str) -> list[Any]:
     return [decode(r.data) for r in peer.scan_labelled_now(time, MAP_LABELS, mission, table)]
 
 
-GRAPH_READ = (MISSIONS, VERTICES, EDGES)
+GRAPH_READ = (MISSIONS, VERTICES, LANDMARKS, EDGES)
 """The tables `graph_at` reads."""
 
 CLOUD_READ = (MISSIONS, CLOUDS)
@@ -149,16 +154,20 @@ def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
         MapImportError: no such mission.
     """
     row = _mission_row(peer, time, mission)
-    vertices = _in_order(peer, time, VERTICES, mission)
-    edges = _in_order(peer, time, EDGES, mission)
     graph = MissionGraph(mission, row.robot, row.frame)
-    records = [(key, 0, v) for key, v in vertices] + [(key, 1, e) for key, e in edges]
+    records = [(key, 0, v) for key, v in _in_order(peer, time, VERTICES, mission)]
+    records += [(key, 0, m) for key, m in _in_order(peer, time, LANDMARKS, mission)]
+    records += [(key, 1, e) for key, e in _in_order(peer, time, EDGES, mission)]
     records.sort(key=lambda record: (record[0][0], record[0][1], record[1], record[0][2:]))
-    # lines renumbered in that order, so the writer interleaves vertices and edges as read
+    # lines renumbered in that order, so the writer interleaves records as read
     for line, (_, kind, message) in enumerate(records, 1):
-        if kind == 0:
+        origin = replace(origin_from_pb(message.origin), line=line)
+        if isinstance(message, Landmark):
+            graph.landmarks[message.index] = landmark_from_pb(message)
+            graph.landmark_origins[message.index] = origin
+        elif kind == 0:
             graph.vertices[message.index] = pose_from_pb(message.pose)
-            graph.origins[message.index] = replace(origin_from_pb(message.origin), line=line)
+            graph.origins[message.index] = origin
             if message.timestamp:
                 graph.timestamps[message.index] = message.timestamp
         else:
@@ -171,14 +180,14 @@ def _in_order(
     peer: Peer, time: int, table: str, mission: str
 ) -> list[tuple[tuple[int, int, int, str], Any]]:
     """The mission's rows of `table` with their sort keys: (insertion time,
-    line, index (vertices), id)."""
+    line, index (vertices, landmarks), id)."""
     if table not in peer.store.tables():
         return []
     decode = peer.table(table).decode
     rows = []
     for revision in peer.scan_labelled_now(time, MAP_LABELS, mission, table):
         message: Any = decode(revision.data)
-        index = message.index if table == VERTICES else 0
+        index = message.index if table in (VERTICES, LANDMARKS) else 0
         key = (revision.insert_time, message.origin.line, index, str(revision.item_id))
         rows.append((key, message))
     return rows
@@ -299,6 +308,8 @@ def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
             info.vertices += summary.items
         elif summary.table == EDGES:
             info.edges += summary.items
+        elif summary.table == LANDMARKS:
+            info.landmarks += summary.items
         elif summary.table == CLOUDS:
             info.points += summary.weight
         if summary.box is not None:

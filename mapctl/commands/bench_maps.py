@@ -147,8 +147,8 @@ def _render_registration(result: dict[str, Any], as_json: bool) -> None:
 @repeatable(
     "--dataset",
     "datasets",
-    click.Choice(["intel", "parking-garage", "tunnels"]),
-    "Sample graph to import (repeat for several; default all three).",
+    click.Choice(["intel", "parking-garage", "tunnels", "victoria-park", "dgs-blocks"]),
+    "Sample graph to import (repeat for several; default all).",
 )
 @click.option(
     "--store",
@@ -174,7 +174,7 @@ def bench_import(
     directory: str | None,
     as_json: bool,
 ) -> None:
-    """Graph elements (vertices + edges) imported per second (issue 5 target:
+    """Graph elements (vertices, landmarks and edges) imported per second (issue 5 target:
     50,000), for the parse alone, parse + staging, and end to end with the commit.
 
     With --json, one object per data set, one per line.

@@ -9,7 +9,7 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "ply", "pcd", "carmen")  # mapapi.maps.source.FORMATS
+FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen")  # source.FORMATS
 EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd")  # mapapi.maps.jobs.EXPORT_FORMATS
 
 
@@ -21,6 +21,8 @@ def _size_text(mission: dict[str, Any]) -> str:
     if mission["vertices"] is None:
         return "?"  # held elsewhere: only its box is known here
     graph = f"{mission['vertices']} v + {mission['edges']} e"
+    if mission.get("landmarks"):
+        graph += f" + {mission['landmarks']} lm"
     if mission["points"]:  # a cloud, or a laser mission's scans
         return (
             f"{graph}, {mission['points']} points"
@@ -40,10 +42,13 @@ def _holders_text(holders: list[dict[str, Any]]) -> str:
     "--format",
     "fmt",
     type=click.Choice(FORMATS),
-    help="The file's format (default: by extension; a folder is a Kimera set).",
+    help="The file's format (default: by extension; a folder is a DGS set of <n>.g2o "
+    "files or a Kimera set; a .txt file GTSAM landmark text if its first record is one).",
 )
 @click.option(
-    "--mission", help="The mission's name (default: the file's); a prefix for a Kimera set."
+    "--mission",
+    help="The mission's name (default: the file's); a prefix for a Kimera set or for "
+    "per-robot g2o (default robot-).",
 )
 @click.option("--robot", help="The robot's name (sources of one mission only).")
 @click.option(
@@ -63,8 +68,9 @@ def import_map(
     voxel: float | None,
     as_json: bool,
 ) -> None:
-    """Import a map FILE: g2o pose graph, Kimera-Multi CSV set, PLY or PCD cloud,
-    CARMEN laser log (.clf, .clf.bz2).
+    """Import a map FILE: g2o pose graph (one mission per robot when its ids are
+    GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
+    cloud, CARMEN laser log (.clf, .clf.bz2).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -142,6 +148,8 @@ def export_map(
         return
     if info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
+        if info.get("landmarks"):
+            what += f", {info['landmarks']} landmarks"
         if info["left_out"]:
             what += f" ({info['left_out']} edges to other missions left out)"
     elif "poses" in info:

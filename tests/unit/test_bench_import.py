@@ -30,7 +30,7 @@ def test_intel_figures_on_each_store(store: str, tmp_path: Path) -> None:
 
 def test_unknown_data_sets_and_stores_are_refused() -> None:
     with pytest.raises(UsageError, match="unknown data set"):
-        measure_import("victoria-park")
+        measure_import("new-college")
     with pytest.raises(UsageError, match="unknown store"):
         measure_import("intel", store="redis")
 
@@ -53,3 +53,11 @@ def test_any_map_file_is_measured_with_its_points(tmp_path: Path) -> None:
     assert row["points"] > 100_000
     refused = CliRunner().invoke(cli, [*args, "--dataset", "intel"])
     assert refused.exit_code == 2
+
+
+def test_the_landmark_and_per_robot_sets_are_measured() -> None:
+    """Landmarks count as elements, like vertices (issue 17's import rates)."""
+    victoria = measure_import("victoria-park", runs=1, store="memory")
+    dgs = measure_import("dgs-blocks", runs=1, store="memory")
+    assert (victoria["missions"], victoria["elements"]) == (1, 6_969 + 151 + 10_608)
+    assert (dgs["missions"], dgs["elements"]) == (4, 64 + 144)

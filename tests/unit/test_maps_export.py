@@ -102,6 +102,7 @@ class TestG2oRoundTrip:
             "path": str(out),
             "format": "g2o",
             "vertices": 1_728,
+            "landmarks": 0,
             "edges": 2_512,
             "left_out": 0,
         }

@@ -24,7 +24,7 @@ from mapapi.maps import (
     read_g2o,
     read_kimera,
 )
-from mapapi.maps.g2o import lean_edge
+from mapapi.maps.g2o_records import lean_edge
 from mapapi.maps.se3 import IDENTITY
 from mapapi.maps.stored import mission_parts
 

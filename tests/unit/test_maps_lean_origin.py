@@ -1,4 +1,4 @@
-"""A g2o line's number formatting in place of its text (mapapi.maps.g2o.lean_origin).
+"""A g2o line's number formatting in place of its text (mapapi.maps.g2o_records.lean_origin).
 
 A row keeps a record's decimals instead of its text only where they write the
 row's values back as exactly that text; whatever the file's formatting (fixed
@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mapapi.maps import parse_g2o, write_g2o
-from mapapi.maps.g2o import lean_edge, lean_vertex
+from mapapi.maps.g2o_records import lean_edge, lean_vertex
 from mapapi.maps.graph import NO_ORIGIN
 
 STYLES = ("fixed", "fixed", "fixed", "repr", "g", "e", "zeros")

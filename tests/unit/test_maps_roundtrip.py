@@ -8,6 +8,10 @@ sample_maps/ is imported into a peer on a real repository and exported again.
 - A Kimera folder is CSV, which `export` does not write: each robot's mission
   exports as the g2o text its graph gives (`write_g2o` of the parsed graph),
   with vertices by index, then the edges in the order the files list them.
+- A DGS folder (`<n>.g2o`, GTSAM Symbol keys) is a multi-robot set like a
+  Kimera folder: each robot's mission exports as the g2o its graph gives.
+- GTSAM landmark text is not g2o: its mission exports as g2o (`VERTEX_XY`,
+  `EDGE_SE2_XY`), and that file comes back byte for byte.
 - A point cloud is downsampled into blocks at import and the order of its
   points is not kept (DESIGN "Maps"): with `--voxel 0` the exported cloud
   holds exactly the source's points, and exporting twice gives the same bytes.
@@ -30,12 +34,16 @@ from mapapi import Peer
 from mapapi.maps import read_kimera
 from mapapi.maps.carmen import Scan, open_log, read_carmen, read_records
 from mapapi.maps.cloud_file import read_cloud
+from mapapi.maps.dgs import read_g2o_source, robot_files
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.source import detect_format
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
-G2O_FILES = sorted(SAMPLES.rglob("*.g2o"))
+DGS_FOLDERS = sorted({p.parent for p in SAMPLES.rglob("*.g2o") if robot_files(p.parent)})
+DGS_FILES = {p for folder in DGS_FOLDERS for p in robot_files(folder)}
+G2O_FILES = sorted(set(SAMPLES.rglob("*.g2o")) - DGS_FILES)
+GTSAM_FILES = sorted(p for p in SAMPLES.rglob("*.txt") if detect_format(p) == "gtsam-landmarks")
 KIMERA_FOLDERS = sorted({p.parent.parent for p in SAMPLES.rglob("measurements.csv")})
 CLOUD_FILES = sorted(p for e in ("*.pcd", "*.ply") for p in SAMPLES.rglob(e))
 LOG_FILES = sorted(SAMPLES.rglob("*.clf.bz2"))
@@ -65,7 +73,7 @@ async def ops(make_peer) -> MapOperations:  # type: ignore[no-untyped-def]
 
 def test_every_sample_map_is_covered() -> None:
     """A map added to sample_maps/ must get a round trip here."""
-    covered = set(G2O_FILES) | set(CLOUD_FILES) | set(LOG_FILES)
+    covered = set(G2O_FILES) | set(CLOUD_FILES) | set(LOG_FILES) | DGS_FILES | set(GTSAM_FILES)
     covered |= {p for folder in KIMERA_FOLDERS for p in folder.rglob("measurements.csv")}
     maps = {
         p
@@ -73,7 +81,8 @@ def test_every_sample_map_is_covered() -> None:
         if p.is_file() and p.name not in NOT_MAPS and not p.name.startswith("LICENSE")
     }
     assert maps == covered
-    assert (len(G2O_FILES), len(KIMERA_FOLDERS), len(CLOUD_FILES), len(LOG_FILES)) == (2, 1, 1, 1)
+    counts = (len(G2O_FILES), len(KIMERA_FOLDERS), len(CLOUD_FILES), len(DGS_FOLDERS))
+    assert (*counts, len(GTSAM_FILES), len(LOG_FILES)) == (3, 1, 1, 1, 1, 1)
 
 
 @pytest.mark.parametrize("source", G2O_FILES, ids=lambda p: p.name)
@@ -140,18 +149,38 @@ async def test_an_edited_record_is_written_from_its_values(
     ]
 
 
-@pytest.mark.parametrize("folder", KIMERA_FOLDERS, ids=lambda p: p.name)
-async def test_a_kimera_folder_exports_as_the_g2o_of_its_graphs(
-    ops: MapOperations, folder: Path, tmp_path: Path
+SETS = [(f, "kimera-csv") for f in KIMERA_FOLDERS] + [(f, "g2o") for f in DGS_FOLDERS]
+
+
+@pytest.mark.parametrize(("folder", "fmt"), SETS, ids=lambda p: getattr(p, "name", p))
+async def test_a_multi_robot_set_exports_as_the_g2o_of_its_graphs(
+    ops: MapOperations, folder: Path, fmt: str, tmp_path: Path
 ) -> None:
-    assert detect_format(folder) == "kimera-csv"
+    assert detect_format(folder) == fmt
     await ops.import_map(str(folder))
-    for graph in read_kimera(folder):
+    graphs = read_kimera(folder) if fmt == "kimera-csv" else read_g2o_source(folder, None, None)
+    for graph in graphs:
         expected = io.StringIO()
         write_g2o(graph, expected, planar=looks_planar(graph))
         out = tmp_path / f"{graph.name}.g2o"
         await ops.export_map(graph.name, str(out))
         assert out.read_text() == expected.getvalue(), graph.name
+
+
+@pytest.mark.parametrize("source", GTSAM_FILES, ids=lambda p: p.name)
+async def test_a_landmark_file_exports_as_g2o_that_comes_back_byte_for_byte(
+    ops: MapOperations, source: Path, tmp_path: Path
+) -> None:
+    await ops.import_map(str(source))
+    out, again = tmp_path / "first.g2o", tmp_path / "again.g2o"
+    await ops.export_map(source.stem, str(out))
+    await ops.import_map(str(out), mission="again")
+    await ops.export_map("again", str(again))
+
+    text = out.read_text()
+    assert "VERTEX_XY " in text
+    assert "EDGE_SE2_XY " in text
+    assert again.read_bytes() == out.read_bytes()
 
 
 @pytest.mark.parametrize("source", CLOUD_FILES, ids=lambda p: p.name)

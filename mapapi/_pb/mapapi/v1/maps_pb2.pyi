@@ -128,10 +128,12 @@ class Edge(_message.Message):
         ODOMETRY: _ClassVar[Edge.Kind]
         LOOP: _ClassVar[Edge.Kind]
         INTER_ROBOT: _ClassVar[Edge.Kind]
+        LANDMARK: _ClassVar[Edge.Kind]
     KIND_UNSPECIFIED: Edge.Kind
     ODOMETRY: Edge.Kind
     LOOP: Edge.Kind
     INTER_ROBOT: Edge.Kind
+    LANDMARK: Edge.Kind
     MISSION_FIELD_NUMBER: _ClassVar[int]
     FROM_VERTEX_FIELD_NUMBER: _ClassVar[int]
     TO_VERTEX_FIELD_NUMBER: _ClassVar[int]
@@ -151,16 +153,18 @@ class Edge(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., from_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., to_vertex: _Optional[_Union[VertexRef, _Mapping]] = ..., relative: _Optional[_Union[Pose3, _Mapping]] = ..., information: _Optional[_Iterable[float]] = ..., kind: _Optional[_Union[Edge.Kind, str]] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ..., information_at: _Optional[_Iterable[int]] = ...) -> None: ...
 
 class Landmark(_message.Message):
-    __slots__ = ("mission", "index", "position", "covariance")
+    __slots__ = ("mission", "index", "position", "covariance", "origin")
     MISSION_FIELD_NUMBER: _ClassVar[int]
     INDEX_FIELD_NUMBER: _ClassVar[int]
     POSITION_FIELD_NUMBER: _ClassVar[int]
     COVARIANCE_FIELD_NUMBER: _ClassVar[int]
+    ORIGIN_FIELD_NUMBER: _ClassVar[int]
     mission: str
     index: int
     position: Point3
     covariance: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., position: _Optional[_Union[Point3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ...) -> None: ...
+    origin: Origin
+    def __init__(self, mission: _Optional[str] = ..., index: _Optional[int] = ..., position: _Optional[_Union[Point3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., origin: _Optional[_Union[Origin, _Mapping]] = ...) -> None: ...
 
 class PointCloudBlock(_message.Message):
     __slots__ = ("mission", "points", "count", "bbox", "compressed", "vertex")
