@@ -20,10 +20,10 @@ $(PY):
 	@$(PY) -m pip install --quiet --upgrade pip
 
 # What `mapctl demo` imports (mapctl/commands/demo.py, mapbench/demo/): the core
-# dependencies, and matplotlib for the two PNGs it draws.
+# dependencies, matplotlib for the two PNGs it draws and gtsam for `align`.
 $(DEMO_STAMP): pyproject.toml | $(PY)
-	@echo "==> installing mapapi and what the demo needs into $(VENV): click, rich, pyzmq, protobuf, numpy, and matplotlib (the 'plot' extra) for its PNGs"
-	@$(PY) -m pip install --quiet -e '.[plot]'
+	@echo "==> installing mapapi and what the demo needs into $(VENV): click, rich, pyzmq, protobuf, numpy, matplotlib (the 'plot' extra) for its PNGs and gtsam (the 'registration' extra) to align the missions"
+	@$(PY) -m pip install --quiet -e '.[plot,registration]'
 	@touch $@
 
 # The test set holds the demo set, so it marks both as installed.

@@ -89,8 +89,7 @@ class AlignOperations:
         from mapapi.maps.frames import frame_item, stage_frames
         from mapapi.maps.importer import ensure_tables
         from mapapi.maps.jobs import align_at, run_job
-        from mapapi.maps.operations import choose_missions
-        from mapapi.maps.stored import GRAPH_READ, list_missions, read_time
+        from mapapi.maps.stored import GRAPH_READ, choose_missions, list_missions, read_time
 
         held = [i for i in await list_missions(self.peer) if i.kind == "graph"]
         if not held:

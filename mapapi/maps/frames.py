@@ -13,17 +13,21 @@ their history like any other, and `mapctl log` shows who aligned what, when.
 from __future__ import annotations
 
 import hashlib
+import itertools
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from mapapi.core.errors import UsageError
 from mapapi.core.ids import ChunkId, ItemId
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.alignment import matrix_pose, pose_matrix
 from mapapi.maps.graph import MissionGraph
-from mapapi.maps.schema import FRAMES, Frame, pose_from_pb, pose_to_pb
+from mapapi.maps.schema import FRAMES, MISSIONS, Frame, pose_from_pb, pose_to_pb
 from mapapi.maps.se3 import Pose
-from mapapi.maps.stored import GRAPH_READ, graph_at, rows_of
+from mapapi.maps.stored import GRAPH_READ, graph_at, read_time, rows_of
 from mapapi.maps.world import WORLD, WorldFrame
 
 if TYPE_CHECKING:
@@ -127,6 +131,22 @@ def stage_frames(
             tx.update(FRAMES, item, row)
         else:
             tx.insert(FRAMES, row, chunks[found.mission], item)
+
+
+async def world_places(peer: Peer, names: list[str]) -> dict[str, WorldFrame | None]:
+    """Each mission's place in the world frame as `peer` reads it now (None: never
+    aligned), read in a worker thread."""
+    async with read_time(peer, names, (MISSIONS, FRAMES)) as at:
+        return await peer.off_loop(lambda: {name: frame_at(peer, at, name) for name in names})
+
+
+def world_box(box: BBox, pose: Pose) -> BBox:
+    """The box, in a mission's frame, that holds `box` moved by `pose` (its corners'
+    box: larger than the points' when the motion turns)."""
+    pairs = zip(box.mins, box.maxs, strict=True)
+    corners = np.array([[*corner, 1.0] for corner in itertools.product(*pairs)])
+    moved = (pose_matrix(pose) @ corners.T).T[:, :3]
+    return BBox(*moved.min(axis=0), *moved.max(axis=0))
 
 
 def in_frame(graph: MissionGraph, pose: Pose) -> MissionGraph:

@@ -24,7 +24,6 @@ it is read once the row's chunk is here.
 from __future__ import annotations
 
 import asyncio
-import fnmatch
 import json
 import os
 import time
@@ -32,7 +31,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from mapapi.core.errors import RequestTimeout, UsageError
+from mapapi.core.errors import RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.schema import CLOUDS, MISSIONS
@@ -177,14 +176,26 @@ class MapOperations:
             counts = await self._job(export_mission, at, mission, target, fmt, frame)
         return {"mission": mission, "path": str(target), "format": fmt, "frame": frame, **counts}
 
-    async def missions(self, swarm: bool = False) -> Json:
+    async def missions(self, swarm: bool = False, frame: str = "mission") -> Json:
         """The missions held here with their counts, box and holders; with
-        `swarm`, also those the spatial index lists on other peers (counts None)."""
+        `swarm`, also those the spatial index lists on other peers (counts None).
+        In the world `frame`, each held one says whether it is aligned, and its
+        box is there (None if not)."""
+        from mapapi.maps.frames import frame_reads, world_box, world_places
         from mapapi.maps.stored import list_missions
 
+        frame_reads(frame)  # refuses an unknown frame
         peer = online(self.peer) if swarm else self.peer
         held = await list_missions(peer)
         rows = [self._mission_json(info) for info in held]
+        if frame != "mission":
+            places = await world_places(peer, [info.name for info in held])
+            for row, info in zip(rows, held, strict=True):
+                place = places[info.name]
+                box = (
+                    None if place is None or info.bbox is None else world_box(info.bbox, place.pose)
+                )
+                row.update(frame=frame, aligned=place is not None, bbox=_box(box))
         if swarm:
             names = {info.name for info in held}
             for found in await peer.query_bbox(peer.grid.bounds, MISSIONS):
@@ -245,7 +256,7 @@ class MapOperations:
         in `frame` ("world" once aligned)."""
         from mapapi.maps.frames import frame_reads
         from mapapi.maps.jobs import draw_missions
-        from mapapi.maps.stored import list_missions, read_time
+        from mapapi.maps.stored import choose_missions, list_missions, read_time
 
         box = None if bbox is None else BBox.from_tuple(bbox)
         chosen = [
@@ -368,27 +379,3 @@ def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:
         "holders": holders,
         "held": False,
     }
-
-
-def choose_missions(
-    held: list[MissionInfo], names: list[str] | None, box: BBox | None
-) -> list[MissionInfo]:
-    """The missions named (default: those in `box`, or all) held here, to draw or
-    align (see `plot_map`); a name may be a shell pattern
-    (`tunnels-*`).
-
-    Raises:
-        UsageError: a name or pattern matches no mission held here, or none is left to draw.
-    """
-    if names:
-        missing = [n for n in names if not any(fnmatch.fnmatchcase(i.name, n) for i in held)]
-        if missing:
-            raise UsageError(
-                f"no mission {', '.join(map(repr, missing))} here; `mapctl missions` lists them"
-            )
-        return [i for i in held if any(fnmatch.fnmatchcase(i.name, n) for n in names)]
-    chosen = [i for i in held if box is None or (i.bbox is not None and i.bbox.overlaps(box))]
-    if not chosen:
-        where = " in that box" if box is not None else ""
-        raise UsageError(f"no mission held here{where}; import one with `mapctl import`")
-    return chosen

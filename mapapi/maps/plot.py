@@ -11,6 +11,7 @@ for everything else, drawn with matplotlib's Agg backend (no display needed).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -115,10 +116,35 @@ def _draw(
         _zoom(ax, box, u, v)
     ax.set_title(title or f"top-down view (looking down {AXES[up]})")
     ax.grid(True, linewidth=0.3, alpha=0.5)
+    _scale_bar(ax)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize="small", markerscale=2)
     figure.tight_layout()
     figure.savefig(str(output))
+
+
+def _scale_bar(ax: Any) -> None:
+    """A bar of a round length (1, 2 or 5 times a power of ten metres, about a
+    fifth of the view's width) in the lower right corner."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    ax.figure.canvas.draw()  # the limits an equal aspect gives are known once drawn
+    width = abs(ax.get_xlim()[1] - ax.get_xlim()[0])
+    if not width > 0:
+        return
+    power = 10 ** math.floor(math.log10(width / 5))
+    length = max(s * power for s in (1, 2, 5) if s * power <= width / 4) if power else 0
+    if length:
+        bar = AnchoredSizeBar(
+            ax.transData,
+            length,
+            f"{length:g} m",
+            "lower right",
+            pad=0.5,
+            frameon=False,
+            size_vertical=0,
+        )
+        ax.add_artist(bar)
 
 
 def _scatter(ax: Any, figure: Any, cloud: PointCloud, u: int, v: int, up: int) -> None:
@@ -172,7 +198,8 @@ def _trajectories(
         ax.plot([], [], color="grey", linewidth=0.6, label="loop closures (robot's colour)")
     if links:
         ax.add_collection(
-            LineCollection(links, colors="black", linewidths=0.3, alpha=0.07, linestyles="dashed")
+            # thin and light: a set holds thousands, most of them wrong matches
+            LineCollection(links, colors="black", linewidths=0.2, alpha=0.04, linestyles="dashed")
         )
         ax.plot([], [], color="black", linewidth=0.6, linestyle="--", label="inter-robot edges")
 

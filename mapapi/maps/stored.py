@@ -14,12 +14,14 @@ them (`mapapi.maps.jobs`), so a serving peer's event loop keeps answering.
 
 from __future__ import annotations
 
+import fnmatch
 import logging
 from collections.abc import AsyncIterator, Collection, Iterable, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+from mapapi.core.errors import UsageError
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud, cloud_from_blocks
@@ -319,3 +321,27 @@ def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
     for info in infos.values():
         info.holders = peer.holders(info.chunks[MISSIONS])
     return [infos[name] for name in sorted(infos)]
+
+
+def choose_missions(
+    held: list[MissionInfo], names: list[str] | None, box: BBox | None
+) -> list[MissionInfo]:
+    """The missions named (default: those in `box`, or all) held here, to draw or
+    align (see `plot_map`); a name may be a shell pattern
+    (`tunnels-*`).
+
+    Raises:
+        UsageError: a name or pattern matches no mission held here, or none is left to draw.
+    """
+    if names:
+        missing = [n for n in names if not any(fnmatch.fnmatchcase(i.name, n) for i in held)]
+        if missing:
+            raise UsageError(
+                f"no mission {', '.join(map(repr, missing))} here; `mapctl missions` lists them"
+            )
+        return [i for i in held if any(fnmatch.fnmatchcase(i.name, n) for n in names)]
+    chosen = [i for i in held if box is None or (i.bbox is not None and i.bbox.overlaps(box))]
+    if not chosen:
+        where = " in that box" if box is not None else ""
+        raise UsageError(f"no mission held here{where}; import one with `mapctl import`")
+    return chosen

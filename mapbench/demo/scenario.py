@@ -12,7 +12,12 @@ the tunnels map together, finds and loads it by region, and settles a conflict.
    before either commits; the first commits, the last one's commit conflicts,
    it resolves with the mean of both edits and commits again; both peers read
    the vertex back.
-5. plot: the last peer draws the whole map and the query box as PNGs.
+5. align: the last peer, which holds every mission now, places them in one
+   world frame from their inter-robot edges (`mapctl align`: gtsam) and
+   commits each one's place; every peer waits until it reads the places of
+   the missions it imported, which reach it as their frames chunks replicate.
+6. plot: the last peer draws the merged map in the world frame, and the
+   query box over the missions as stored, as PNGs.
 
 Every step is timed, with the bytes the swarm's transports sent meanwhile; the
 summary adds each peer's chunks, commits and traffic (`mapapi.net.stats`).
@@ -42,6 +47,9 @@ PREFIX = "tunnels-"
 QUERY_BOX = (-15.0, -15.0, -15.0, 15.0, 15.0, 15.0)
 """Metres around the origin of the map frame, where every robot's trajectory begins."""
 VIEW = "demo"
+ALIGN_VIEW = "align"
+FRAMES_WAIT_S = 30.0
+"""How long a peer may take to read the places of its missions once aligned."""
 MAP_PNG, QUERY_PNG = "tunnels-map.png", "tunnels-query.png"
 EDITS = ((0.5, 0.0, 0.0), (0.0, 0.0, 0.3))
 """How the first and the last peer move the vertex (metres in x, y, z)."""
@@ -139,8 +147,9 @@ class Demo:
             missions = await self._step("import", "importing the tunnels set", self._import, files)
             query = await self._step("query", "querying a box and loading", self._query, missions)
             conflict = await self._step("conflict", "editing one vertex twice", self._conflict)
+            aligned = await self._step("align", "aligning the missions", self._align, missions)
             pngs = await self._step("plot", "drawing the map and the query", self._plot, missions)
-            return await self._summary(missions, query, conflict, pngs)
+            return await self._summary(missions, query, conflict, pngs, aligned)
         finally:
             await self.swarm.disconnect()
 
@@ -280,6 +289,51 @@ class Demo:
             "agree": all(v == mean for v in seen.values()),
         }
 
+    async def _align(self, missions: list[Json]) -> Json:
+        aligner = self.peers[-1]
+        done = await aligner.call("align", view=ALIGN_VIEW, missions=[f"{PREFIX}*"])
+        before, after = done["rms_before"], done["rms_after"]
+        self.progress(
+            "info",
+            f"{aligner.name} placed {len(done['frames'])} missions in the world frame of "
+            f"{done['anchor']}: {done['inliers']} of {done['edges']} inter-robot edges kept, "
+            f"their RMS {before['metres']:.1f} m -> {after['metres']:.2f} m",
+        )
+        if done["unaligned"]:
+            raise DemoFailed(f"missions left unaligned: {', '.join(done['unaligned'])}")
+        seen = {}
+        for peer in self.peers:
+            own = sorted(m["name"] for m in missions if m["peer"] == peer.name)
+            seen[peer.name] = await self._frames_arrive(peer, own)
+            self.progress("info", f"{peer.name} reads the places of {', '.join(own)}")
+        return {
+            "peer": aligner.name,
+            "anchor": done["anchor"],
+            "missions": [f["mission"] for f in done["frames"]],
+            "edges": done["edges"],
+            "inliers": done["inliers"],
+            "rms_before": before,
+            "rms_after": after,
+            "commit": done["commit"],
+            "seen": seen,
+        }
+
+    async def _frames_arrive(self, peer: SwarmPeer, own: list[str]) -> float:
+        """Seconds until `peer` reads a world place for each of `own` (its missions),
+        asking again until `FRAMES_WAIT_S` passed.
+
+        Raises:
+            DemoFailed: it did not in time.
+        """
+        started = time.perf_counter()
+        while True:
+            listed = (await peer.call("missions", frame="world"))["missions"]
+            if set(own) <= {m["name"] for m in listed if m.get("aligned")}:
+                return round(time.perf_counter() - started, 3)
+            if time.perf_counter() - started > FRAMES_WAIT_S:
+                raise DemoFailed(f"{peer.name} never read the places of {', '.join(own)}")
+            await asyncio.sleep(0.05)  # a poll: the frames come by replication
+
     async def _plot(self, missions: list[Json]) -> dict[str, str]:
         drawer = self.peers[-1]
         count = len(self.swarm.repos)
@@ -288,9 +342,9 @@ class Demo:
             "plot_map",
             path=str(self.out / MAP_PNG),
             missions=[f"{PREFIX}*"],
-            bbox=list(QUERY_BOX),
             labels=labels,
-            title=f"the tunnels map on {drawer.name}, imported by {count} peers",
+            title=f"the merged tunnels map on {drawer.name}, imported by {count} peers",
+            frame="world",
         )
         query = await drawer.call(
             "plot_map",
@@ -306,7 +360,7 @@ class Demo:
 
     # -- the summary -------------------------------------------------------------------
     async def _summary(
-        self, missions: list[Json], query: Json, conflict: Json, pngs: dict[str, str]
+        self, missions: list[Json], query: Json, conflict: Json, pngs: dict[str, str], align: Json
     ) -> Json:
         rows, chunks, commits = [], set(), set()
         for peer in self.peers:
@@ -338,6 +392,7 @@ class Demo:
             "bytes_moved": sum(r["sent"]["bytes"] for r in rows),
             "query": query,
             "conflict": conflict,
+            "align": align,
             "pngs": pngs,
             "bytes_by_step": self.bytes_by_step,
             "timings": self.timings,

@@ -94,6 +94,14 @@ def _render(summary: dict[str, Any]) -> None:
         f"{second} to {_xyz(clash['second'])}. {second}'s commit conflicted; resolved with "
         f"the mean {_xyz(clash['resolved'])}, which both read back: {clash['agree']}"
     )
+    align = summary["align"]
+    render.line(
+        f"{align['peer']} aligned {len(align['missions'])} missions in the world frame of "
+        f"{align['anchor']}: {align['inliers']} of {align['edges']} inter-robot edges kept, their "
+        f"RMS {align['rms_before']['metres']:.1f} m before, {align['rms_after']['metres']:.2f} m "
+        f"after; every peer read the places of its own missions "
+        f"(slowest in {max(align['seen'].values()):.2f} s)"
+    )
     timings, moved = summary["timings"], summary["bytes_by_step"]
     render.table(
         "steps",

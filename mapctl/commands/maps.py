@@ -164,14 +164,16 @@ def export_map(
 @click.option(
     "--swarm", is_flag=True, help="Also list the missions other peers hold (needs a running peer)."
 )
+@_frame_option("Give each mission's box")
 @json_option
 @pass_session
-def missions(session: Session, swarm: bool, as_json: bool) -> None:
+def missions(session: Session, swarm: bool, frame: str, as_json: bool) -> None:
     """List the missions held here: robot, size (vertices + edges, or points),
-    box (to the metre) and holders."""
+    box (to the metre) and holders. In the world frame a mission not aligned
+    yet has no box ("-")."""
     from mapctl import render
 
-    info = session.call("missions", swarm=swarm)
+    info = session.call("missions", swarm=swarm, frame=frame)
     if as_json:
         render.emit_json(info)
         return

@@ -112,6 +112,7 @@ def _maps(out: Outputs, repo: Path, root: Path) -> None:
     out.run(("export",), "intel", "-o", str(root / "intel.g2o"), repo=repo)
     out.run(("plot",), "-o", str(root / "map.png"), repo=repo)
     out.run(("align",), repo=repo)  # one mission: the world is its frame
+    out.run(("missions",), "--frame", "world", repo=repo)
 
 
 def run_secure(out: Outputs, root: Path) -> None:

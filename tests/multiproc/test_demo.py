@@ -92,7 +92,7 @@ def test_the_querying_peer_holds_what_lies_in_the_box_after_the_load(
         tiles = tile_graph(graph)
         if importer[name] != query["peer"]:  # the tiles in the box, each its vertices and edges
             tiles = [t for t in tiles if t.bbox.overlaps(box)]
-            chunks += 1 + sum(1 + bool(t.edges) for t in tiles)
+            chunks += 2 + sum(1 + bool(t.edges) for t in tiles)  # and its row's and frames' chunks
         assert (held[name]["vertices"], held[name]["edges"]) == (
             sum(len(t.vertices) for t in tiles),
             sum(len(t.edges) for t in tiles),
@@ -125,9 +125,23 @@ def test_the_totals_add_up(demo: tuple[dict[str, Any], Path]) -> None:
     assert summary["bytes_moved"] == sum(p["sent"]["bytes"] for p in peers) > 0
     assert summary["chunks"] >= 3 * len(summary["missions"])
     assert summary["commits"] >= len(summary["missions"]) + 2  # imports and two edits
-    steps = ["start", "import", "query", "conflict", "plot", "stop", "total"]
+    steps = ["start", "import", "query", "conflict", "align", "plot", "stop", "total"]
     assert list(summary["timings"]) == steps
     assert summary["timings"]["total"] >= sum(summary["timings"][s] for s in steps[:-1])
+
+
+def test_one_peer_aligned_every_mission_and_every_peer_read_its_own_places(
+    demo: tuple[dict[str, Any], Path],
+) -> None:
+    summary, _ = demo
+    align = summary["align"]
+    names = sorted(m["name"] for m in summary["missions"])
+    assert align["peer"] == summary["peers"][-1]["name"]
+    assert align["missions"] == names  # every robot joined to the anchor
+    assert align["anchor"] in names
+    assert 0 < align["inliers"] < align["edges"]  # the set's wrong matches weighed out
+    assert align["rms_after"]["metres"] < align["rms_before"]["metres"]
+    assert sorted(align["seen"]) == sorted(p["name"] for p in summary["peers"])
 
 
 def test_the_pngs_are_images(demo: tuple[dict[str, Any], Path]) -> None:

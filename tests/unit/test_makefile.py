@@ -62,10 +62,10 @@ class TestCheck:
 
 
 class TestInstallSets:
-    def test_demo_installs_the_plot_extra_only(self) -> None:
+    def test_demo_installs_the_plot_and_registration_extras_only(self) -> None:
         stamp, recipe = install("demo")
         assert stamp == "$(DEMO_STAMP)"
-        assert "'.[plot]'" in pip_line(recipe)
+        assert "'.[plot,registration]'" in pip_line(recipe)  # PNGs, and gtsam for `align`
         assert not any("ensure-syslibs" in line for line in recipe)  # no apt-get for the demo
 
     def test_test_installs_everything_and_marks_the_demo_set_done(self) -> None:
