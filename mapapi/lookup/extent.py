@@ -9,8 +9,9 @@ The built-in extents:
   ``mapctl set`` can be placed in space;
 - ``mapapi.v1.Mission`` (its ``bbox``, labelled with its name),
   ``mapapi.v1.Vertex`` (its position), ``mapapi.v1.Landmark`` (its position)
-  and ``mapapi.v1.PointCloudBlock`` (its ``bbox``), each labelled with the
-  name of the mission it belongs to.
+  ``mapapi.v1.PointCloudBlock`` (its ``bbox``) and ``mapapi.v1.Frame`` (its
+  ``bbox``, the mission's in the world frame), each labelled with the name of
+  the mission it belongs to.
 
 Other types can be added with `register_extent`.
 """
@@ -78,6 +79,8 @@ _EXTENTS: dict[str, Extent] = {
     "mapapi.v1.Vertex": Extent(lambda m: _point(m.pose), label=_mission_of),
     "mapapi.v1.Landmark": Extent(lambda m: _point(m.position), label=_mission_of),
     "mapapi.v1.PointCloudBlock": Extent(_optional_box3, label=_mission_of),
+    # A mission's place in the world frame lies at its box there (`mapctl align`).
+    "mapapi.v1.Frame": Extent(_optional_box3, label=_mission_of),
 }
 
 

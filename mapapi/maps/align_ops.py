@@ -92,6 +92,7 @@ class AlignOperations:
         from mapapi.maps.stored import GRAPH_READ, choose_missions, list_missions, read_time
 
         held = [i for i in await list_missions(self.peer) if i.kind == "graph"]
+        infos = {i.name: i for i in held}
         if not held:
             raise UsageError("no pose-graph mission here to align; import one first")
         chosen = [i.name for i in choose_missions(held, missions, None)]
@@ -108,7 +109,7 @@ class AlignOperations:
         def write(tx: Transaction) -> None:
             for item, row in rows.items():
                 tx.update(MISSIONS, item, row)
-            stage_frames(tx, result.frames.values(), chunks, existing)
+            stage_frames(tx, result.frames.values(), infos, chunks, existing)
 
         self.views.stage(view, write)
         aligned = len(result.frames)

@@ -25,9 +25,24 @@ from mapapi.core.ids import ChunkId, ItemId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.alignment import matrix_pose, pose_matrix
 from mapapi.maps.graph import MissionGraph
-from mapapi.maps.schema import FRAMES, MISSIONS, Frame, pose_from_pb, pose_to_pb
+from mapapi.maps.schema import (
+    FRAMES,
+    MISSIONS,
+    Frame,
+    box_from_pb,
+    box_to_pb,
+    pose_from_pb,
+    pose_to_pb,
+)
 from mapapi.maps.se3 import Pose
-from mapapi.maps.stored import GRAPH_READ, graph_at, read_time, rows_of
+from mapapi.maps.stored import (
+    GRAPH_READ,
+    MissionInfo,
+    MissionParts,
+    graph_at,
+    read_time,
+    rows_of,
+)
 from mapapi.maps.world import WORLD, WorldFrame
 
 if TYPE_CHECKING:
@@ -85,9 +100,10 @@ def frame_item(mission: str, frame: str = WORLD) -> ItemId:
     return ItemId(hashlib.sha256(f"mapapi frame\0{mission}\0{frame}".encode()).hexdigest()[:32])
 
 
-def frame_to_pb(found: WorldFrame) -> Any:
-    """The row of one mission's place in the world frame."""
-    return Frame(
+def frame_to_pb(found: WorldFrame, info: MissionInfo | None = None) -> Any:
+    """The row of one mission's place in the world frame; with the mission's
+    `info`, its box moved there and the chunk of its row."""
+    row = Frame(
         mission=found.mission,
         frame=WORLD,
         transform=pose_to_pb(found.pose),
@@ -98,6 +114,11 @@ def frame_to_pb(found: WorldFrame) -> Any:
         duplicate_of=found.duplicate_of,
         content=found.content,
     )
+    if info is not None:
+        row.mission_chunk = info.chunks.get(MISSIONS, "")
+        if info.bbox is not None:
+            row.bbox.CopyFrom(box_to_pb(world_box(info.bbox, found.pose)))
+    return row
 
 
 def frame_from_pb(row: Any) -> WorldFrame:
@@ -111,21 +132,24 @@ def frame_from_pb(row: Any) -> WorldFrame:
         row.edges,
         row.duplicate_of,
         row.content,
+        box_from_pb(row.bbox) if row.HasField("bbox") else None,
+        row.mission_chunk,
     )
 
 
 def stage_frames(
     tx: Transaction,
     frames: Iterable[WorldFrame],
+    held: Mapping[str, MissionInfo],
     chunks: Mapping[str, ChunkId],
     existing: Iterable[str],
 ) -> None:
-    """Buffer each mission's place in `tx`: an update of its row where `existing`
-    names the mission (its row is there at the transaction's begin), else an
-    insert in its frames chunk (`chunks`)."""
+    """Buffer each mission's place in `tx` (with what `held` says of the mission):
+    an update of its row where `existing` names the mission (its row is there at
+    the transaction's begin), else an insert in its frames chunk (`chunks`)."""
     there = set(existing)
     for found in frames:
-        row = frame_to_pb(found)
+        row = frame_to_pb(found, held.get(found.mission))
         item = frame_item(found.mission)
         if found.mission in there:
             tx.update(FRAMES, item, row)
@@ -138,6 +162,33 @@ async def world_places(peer: Peer, names: list[str]) -> dict[str, WorldFrame | N
     aligned), read in a worker thread."""
     async with read_time(peer, names, (MISSIONS, FRAMES)) as at:
         return await peer.off_loop(lambda: {name: frame_at(peer, at, name) for name in names})
+
+
+def needed(
+    parts: Mapping[str, MissionParts],
+    places: Mapping[str, WorldFrame | None],
+    box: BBox,
+    found: set[ChunkId],
+) -> set[ChunkId]:
+    """The chunks a load of `box` needs of the missions of `parts`: for one with a
+    place (a load in the world frame), its untiled chunks and the tiles whose box,
+    moved to the world, overlaps `box`; else `MissionParts.in_box`."""
+    wanted: set[ChunkId] = set()
+    for name, part in parts.items():
+        place = places.get(name)
+        if place is None:
+            wanted |= part.in_box(box, found)
+            continue
+        wanted |= set(part.chunks.values())
+        for tile in part.tiles:
+            if world_box(tile.bbox, place.pose).overlaps(box):
+                wanted |= set(tile.chunks())
+    return wanted
+
+
+def row_chunks(places: Mapping[str, WorldFrame | None]) -> set[ChunkId]:
+    """The chunks of the mission rows that `places` name."""
+    return {ChunkId(p.mission_chunk) for p in places.values() if p and p.mission_chunk}
 
 
 def world_box(box: BBox, pose: Pose) -> BBox:

@@ -5,7 +5,7 @@ the mission's name, so the store indexes a mission's rows and keeps its summary.
 - vertices and landmarks with their mission, placed at their position;
 - edges with their mission (they have no place);
 - point-cloud blocks with their mission, weighing their points, placed at their box;
-- frames (`mapctl align`) with their mission (they have no place).
+- frames (`mapctl align`) with their mission, placed at its box in the world frame.
 
 `mapapi.app` gives these to the store of every peer it builds on a repository,
 as it gives the mission rules; reads of a mission ask for them (`MAP_LABELS`)
@@ -23,7 +23,7 @@ from google.protobuf.message import DecodeError
 from mapapi.maps.schema import Edge, Frame, Landmark, Mission, PointCloudBlock, Vertex
 from mapapi.store.labels import Box, LabelFn, Labels, RowLabel
 
-VERSION = "2"
+VERSION = "3"
 """Bumped when a function below changes what it answers (stores then relabel)."""
 
 
@@ -56,6 +56,10 @@ def _block(m: Any) -> RowLabel:
     return RowLabel(m.mission, m.count, _box3(m.bbox) if m.HasField("bbox") else None)
 
 
+def _frame(m: Any) -> RowLabel:
+    return RowLabel(m.mission, 1, _box3(m.bbox) if m.HasField("bbox") else None)
+
+
 def map_labels() -> Labels:
     """The labels of the map tables' rows, by their protobuf type."""
     by_type = {
@@ -68,7 +72,9 @@ def map_labels() -> Labels:
             Landmark, lambda m: RowLabel(m.mission, 1, _point(m.position))
         ),
         PointCloudBlock.DESCRIPTOR.full_name: _reader(PointCloudBlock, _block),
-        Frame.DESCRIPTOR.full_name: _reader(Frame, lambda m: RowLabel(m.mission)),
+        # a place has the mission's box in the world frame: the spatial index
+        # places its frames chunk there, for queries in the world frame
+        Frame.DESCRIPTOR.full_name: _reader(Frame, _frame),
     }
     return Labels(by_type, VERSION)
 

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from mapapi.core.errors import RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
-from mapapi.maps.schema import CLOUDS, MISSIONS
+from mapapi.maps.schema import CLOUDS, FRAMES, MISSIONS
 from mapapi.service.ops import Operation
 from mapapi.service.transfer_ops import online, placed_json
 
@@ -277,37 +277,45 @@ class MapOperations:
             "frame": frame,
         }
 
-    async def load_bbox(self, bbox: list[float], table: str | None = None) -> Json:
+    async def load_bbox(
+        self, bbox: list[float], table: str | None = None, frame: str = "mission"
+    ) -> Json:
         """Participate in every chunk in `bbox` (of `table`) not held here, and in
         the chunks of the missions found that the box needs: their tiles that
         overlap it (`MissionParts.in_box`). Returns the query's results afterwards
         (every chunk now held), `loaded`: each chunk fetched, in order, with its
         rows and their bytes, and `items` and `bytes`: what was fetched in all.
+        In the world `frame`, the box is in the world frame: it finds the aligned
+        missions' places there, then loads their rows and the tiles whose box,
+        moved to the world, overlaps it (`frames.needed`).
 
         Raises:
             PeerNotRunning: a chunk must be fetched but the peer is off the network.
         """
+        from mapapi.maps.frames import needed, row_chunks, world_places
         from mapapi.maps.stored import mission_parts
 
         key = _load_key(bbox, table)
         box = BBox.from_tuple(bbox)
-        found = await self._query(bbox, table)
+        found = await self._query(bbox, table, frame)
         todo = [ChunkId(r["chunk"]) for r in found if not r["held"]]
         loaded: list[Json] = []
         self._loads[key] = (0, len(todo))
         try:
             loaded += await self._load_all(key, todo, todo)
-            names = {name for r in found for name in r["missions"]}
-            held = set(self.peer.store.chunk_ids())
+            names = sorted({name for r in found for name in r["missions"]})
+            places = await world_places(self.peer, names) if frame != "mission" else {}
+            more = sorted(row_chunks(places) - set(self.peer.store.chunk_ids()))
+            todo += more
+            loaded += await self._load_all(key, more, todo)  # the rows name the tiles
             parts = await mission_parts(self.peer, names)
-            found_chunks = {ChunkId(r["chunk"]) for r in found}
-            wanted = {c for p in parts.values() for c in p.in_box(box, found_chunks)}
-            more = sorted(wanted - held)
+            wanted = needed(parts, places, box, {ChunkId(r["chunk"]) for r in found})
+            more = sorted(wanted - set(self.peer.store.chunk_ids()))
             todo += more
             loaded += await self._load_all(key, more, todo)
         finally:
             self._loads.pop(key, None)
-        results = await self._query(bbox, table) if loaded else found
+        results = await self._query(bbox, table, frame) if loaded else found
         return {
             "results": results,
             "loaded": loaded,
@@ -315,8 +323,15 @@ class MapOperations:
             "bytes": sum(c["bytes"] for c in loaded),
         }
 
-    async def _query(self, bbox: list[float], table: str | None) -> list[Json]:
-        found = await self.peer.query_bbox(BBox.from_tuple(bbox), table)
+    async def _query(self, bbox: list[float], table: str | None, frame: str) -> list[Json]:
+        """The chunks in the box: in the world frame, the aligned missions' places
+        (their frames chunks lie at the missions' world boxes); else those of the
+        missions' own frames, which places are not."""
+        if frame != "mission":
+            found = await self.peer.query_bbox(BBox.from_tuple(bbox), FRAMES)
+        else:
+            found = await self.peer.query_bbox(BBox.from_tuple(bbox), table)
+            found = [f for f in found if f.ref.table != FRAMES or table == FRAMES]
         return [placed_json(f) for f in found]
 
     async def _load_all(self, key: str, chunks: list[ChunkId], todo: list[ChunkId]) -> list[Json]:

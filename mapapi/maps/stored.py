@@ -31,6 +31,7 @@ from mapapi.maps.labels import MAP_LABELS
 from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
+    FRAMES,
     LANDMARKS,
     MISSIONS,
     VERTICES,
@@ -302,8 +303,8 @@ def _missions_of(peer: Peer, rows: list[Revision]) -> list[MissionInfo]:
     boxes: dict[str, list[BBox]] = {}
     for summary in peer.label_summaries(MAP_LABELS):
         info = infos.get(summary.label)
-        if info is None or summary.table == MISSIONS:
-            continue  # rows whose mission row is not held here
+        if info is None or summary.table in (MISSIONS, FRAMES):
+            continue  # rows whose mission row is not held here; places lie in the world frame
         if not (info.tiles and summary.table in (VERTICES, EDGES)):
             info.chunks.setdefault(summary.table, summary.chunk)
         if summary.table == VERTICES:

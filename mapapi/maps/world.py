@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
 from mapapi.maps.alignment import consensus_frame, invert, matrix_pose, pose_matrix
 from mapapi.maps.graph import GraphEdge, MissionGraph
 from mapapi.maps.registration import (
@@ -63,6 +64,8 @@ class WorldFrame:
         edges: its inter-mission edges GNC kept.
         duplicate_of: the mission it repeats, whose frame it takes ("" if none).
         content: its `content_hash`.
+        bbox: once stored, the mission's box moved into the world frame.
+        mission_chunk: once stored, the chunk of its mission row ("" if unknown).
     """
 
     mission: str
@@ -73,6 +76,8 @@ class WorldFrame:
     edges: int
     duplicate_of: str
     content: str
+    bbox: BBox | None = None
+    mission_chunk: str = ""
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ from typing import Any
 
 import click
 
+from mapctl.commands.maps import frame_option
 from mapctl.session import Session, json_option, pass_session
 
 
@@ -21,6 +22,7 @@ from mapctl.session import Session, json_option, pass_session
     help="Participate in every chunk found that is not held here, and in the chunks of "
     "the missions found that lie in the box: their tiles there, with their edges.",
 )
+@frame_option("The box is", "in the missions' own frames, or in")
 @json_option
 @pass_session
 def query_bbox(
@@ -28,24 +30,28 @@ def query_bbox(
     bbox: tuple[float, ...],
     table: str | None,
     load: bool,
+    frame: str,
     as_json: bool,
 ) -> None:
     """List the chunks and missions whose box overlaps the box, with their holders.
 
-    The box is in metres, in the map frame. Off the network only the chunks
-    held here are searched; with a running peer the swarm's spatial index is.
+    The box is in metres, in the missions' own frames (a mission's place in the
+    world frame, a `frames` chunk, lies at its world box: it is found with
+    --frame world, which then loads the tiles whose box, moved to the world,
+    overlaps). Off the network only the chunks held here are searched; with a
+    running peer the swarm's spatial index is.
     A box partly outside the index's bounds is clamped; one fully outside
     matches nothing. With --json, --load adds "loaded": the chunks fetched,
     and "items" and "bytes": the rows fetched and their payloads' size.
     """
     from mapctl import render
 
-    args = {"bbox": list(bbox), "table": table}
+    args: dict[str, Any] = {"bbox": list(bbox), "table": table}
     if load:
         with render.transfer("loading the chunks in the box") as show:
             info: dict[str, Any] = session.call_with_progress(
                 "load_bbox",
-                args,
+                {**args, "frame": frame},
                 ("load_progress", args),
                 lambda state: show(state["loaded"], state["of"]),
             )
@@ -57,7 +63,10 @@ def query_bbox(
                 size = render.size_text(info["bytes"])
                 render.note(f"loaded {len(info['loaded'])} chunks: {info['items']} items, {size}")
     else:
-        info = session.call("query_bbox", **args)
+        places = frame == "world"  # a mission's place lies at its box in the world frame
+        info = session.call("query_bbox", **{**args, "table": "frames" if places else table})
+        if not places and table != "frames":
+            info["results"] = [r for r in info["results"] if r["table"] != "frames"]
     results = info["results"]
     if as_json:
         render.emit_json(info)

@@ -99,15 +99,14 @@ def import_map(
     render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
 
 
-def _frame_option(what: str) -> Any:
-    """`--frame mission|world`: the frame to give a graph's poses in."""
+def frame_option(what: str, where: str = "in each mission's own frame, or in") -> Any:
+    """`--frame mission|world`: the frame a command reads or takes poses in."""
     return click.option(
         "--frame",
         type=click.Choice(["mission", "world"]),
         default="mission",
         show_default=True,
-        help=f"{what} in each mission's own frame, or in the shared world frame "
-        "(`mapctl align` places missions there).",
+        help=f"{what} {where} the shared world frame (`mapctl align` places missions there).",
     )
 
 
@@ -130,7 +129,7 @@ def _output_option(text: str) -> Any:
     type=click.Choice(EXPORT_FORMATS),
     help="The format to write (default: by the extension; needed for .txt).",
 )
-@_frame_option("Write a graph's poses")
+@frame_option("Write a graph's poses")
 @json_option
 @pass_session
 def export_map(
@@ -164,7 +163,7 @@ def export_map(
 @click.option(
     "--swarm", is_flag=True, help="Also list the missions other peers hold (needs a running peer)."
 )
-@_frame_option("Give each mission's box")
+@frame_option("Give each mission's box")
 @json_option
 @pass_session
 def missions(session: Session, swarm: bool, frame: str, as_json: bool) -> None:
@@ -217,7 +216,7 @@ def missions(session: Session, swarm: bool, frame: str, as_json: bool) -> None:
 )
 @click.option("--zoom", is_flag=True, help="Show the --bbox box and its surroundings only.")
 @click.option("--title", help="The picture's title (default: the axis it looks down).")
-@_frame_option("Draw the trajectories")
+@frame_option("Draw the trajectories")
 @_output_option("The PNG to write.")
 @json_option
 @pass_session

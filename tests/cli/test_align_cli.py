@@ -46,10 +46,25 @@ def test_align_commits_each_missions_place_and_world_reads_use_it(
     place = pose_matrix(tuple(done["frames"][0]["transform"]))
     assert np.allclose(_poses(world), place @ _poses(mission), atol=1e-6)
 
+    # the places lie at the missions' boxes moved to the world; a plain query skips them
+    box = [str(v) for v in world_box_of(tunnels, "robot1")]
+    found = tunnels.json("query-bbox", *box, "--frame", "world")["results"]
+    assert {(r["table"], tuple(r["missions"])) for r in found} >= {("frames", ("robot1",))}
+    plain = tunnels.json("query-bbox", *box)["results"]
+    assert "frames" not in {r["table"] for r in plain}
+
     drawn = tunnels.json(
         "plot", "--frame", "world", "-m", "robot1", "-m", "robot3", "-o", str(tmp_path / "w.png")
     )
     assert (drawn["frame"], drawn["missions"]) == ("world", ["robot1", "robot3"])
+
+
+def world_box_of(mapctl: Mapctl, mission: str) -> list[float]:
+    """The mission's box in the world frame, as `missions --frame world` gives it."""
+    listed = mapctl.json("missions", "--frame", "world")["missions"]
+    (row,) = [m for m in listed if m["name"] == mission]
+    assert row["aligned"] is True
+    return list(row["bbox"])
 
 
 def test_a_mission_never_aligned_has_no_place_in_the_world_frame(

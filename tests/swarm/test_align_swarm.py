@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from mapapi import ConflictError, Peer
-from mapapi.maps import FRAMES, import_graphs
+from mapapi.maps import FRAMES, import_graphs, list_missions
 from mapapi.maps.align_ops import AlignOperations
 from mapapi.maps.alignment import pose_matrix
-from mapapi.maps.frames import frame_at, frame_item
+from mapapi.maps.frames import frame_at, frame_item, world_box
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.stored import GRAPH_READ, read_time
 from mapapi.maps.world import WorldFrame
@@ -99,3 +99,30 @@ async def test_two_peers_aligning_at_once_conflict_and_resolve(make_peer: MakePe
         assert found["a"] is not None
         assert np.allclose(pose_matrix(found["b"].pose), np.eye(4), atol=1e-9)
     assert first["anchor"] == "a"
+
+
+async def test_a_box_in_the_world_frame_finds_and_loads_the_missions_aligned_there(
+    make_peer: MakePeer,
+) -> None:
+    a, _, c = await lookup_swarm(make_peer, 3)
+    await import_graphs(a, _scene())
+    await AlignOperations(a, Workspace(a)).align("main", anchor="a")
+    ops = MapOperations(c)
+    far = [-5.0, 45.0, -1.0, 40.0, 55.0, 1.0]  # where d lies in its own frame: no place
+
+    assert (await ops.load_bbox(far, frame="world"))["results"] == []
+    loaded = await ops.load_bbox([10.0, -2.0, -1.0, 12.0, 2.0, 1.0], frame="world")
+
+    # the places of a, b and c lie there (each at its mission's box moved to the world)
+    assert sorted(n for r in loaded["results"] for n in r["missions"]) == ["a", "b", "c"]
+    assert {r["table"] for r in loaded["results"]} == {FRAMES}
+    infos = {i.name: i for i in await list_missions(c)}
+    assert sorted(infos) == ["a", "b", "c"]  # their rows and tiles came; nothing of d
+    assert all(i.vertices == 16 for i in infos.values())
+    found = await _frames(c, ["b"])
+    assert found["b"] is not None
+    assert found["b"].bbox == world_box(infos["b"].bbox, found["b"].pose)
+    # in the missions' own frames the same far box finds d, and no place
+    mission = await ops.load_bbox(far)
+    assert {n for r in mission["results"] for n in r["missions"]} == {"d"}
+    assert FRAMES not in {r["table"] for r in mission["results"]}

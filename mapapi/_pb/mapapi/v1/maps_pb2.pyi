@@ -183,7 +183,7 @@ class PointCloudBlock(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., points: _Optional[bytes] = ..., count: _Optional[int] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., compressed: _Optional[bool] = ..., vertex: _Optional[int] = ...) -> None: ...
 
 class Frame(_message.Message):
-    __slots__ = ("mission", "frame", "transform", "covariance", "anchor", "linked", "edges", "duplicate_of", "content")
+    __slots__ = ("mission", "frame", "transform", "covariance", "anchor", "linked", "edges", "duplicate_of", "content", "bbox", "mission_chunk")
     MISSION_FIELD_NUMBER: _ClassVar[int]
     FRAME_FIELD_NUMBER: _ClassVar[int]
     TRANSFORM_FIELD_NUMBER: _ClassVar[int]
@@ -193,6 +193,8 @@ class Frame(_message.Message):
     EDGES_FIELD_NUMBER: _ClassVar[int]
     DUPLICATE_OF_FIELD_NUMBER: _ClassVar[int]
     CONTENT_FIELD_NUMBER: _ClassVar[int]
+    BBOX_FIELD_NUMBER: _ClassVar[int]
+    MISSION_CHUNK_FIELD_NUMBER: _ClassVar[int]
     mission: str
     frame: str
     transform: Pose3
@@ -202,4 +204,6 @@ class Frame(_message.Message):
     edges: int
     duplicate_of: str
     content: str
-    def __init__(self, mission: _Optional[str] = ..., frame: _Optional[str] = ..., transform: _Optional[_Union[Pose3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., anchor: _Optional[str] = ..., linked: _Optional[_Iterable[str]] = ..., edges: _Optional[int] = ..., duplicate_of: _Optional[str] = ..., content: _Optional[str] = ...) -> None: ...
+    bbox: Box3
+    mission_chunk: str
+    def __init__(self, mission: _Optional[str] = ..., frame: _Optional[str] = ..., transform: _Optional[_Union[Pose3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., anchor: _Optional[str] = ..., linked: _Optional[_Iterable[str]] = ..., edges: _Optional[int] = ..., duplicate_of: _Optional[str] = ..., content: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., mission_chunk: _Optional[str] = ...) -> None: ...
