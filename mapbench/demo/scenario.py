@@ -12,10 +12,11 @@ the tunnels map together, finds and loads it by region, and settles a conflict.
    before either commits; the first commits, the last one's commit conflicts,
    it resolves with the mean of both edits and commits again; both peers read
    the vertex back.
-5. align: the last peer, which holds every mission now, places them in one
-   world frame from their inter-robot edges (`mapctl align`: gtsam) and
-   commits each one's place; every peer waits until it reads the places of
-   the missions it imported, which reach it as their frames chunks replicate.
+5. align: every peer watches the `frames` table (`mapctl watch`); the last
+   peer, which holds every mission now, places them in one world frame from
+   their inter-robot edges (`mapctl align`: gtsam) and commits each one's
+   place; every peer's watch then receives the eight places (a place lies at
+   its mission's box in the world frame, where the watches listen).
 6. plot: the last peer draws the merged map in the world frame, and the
    query box over the missions as stored, as PNGs.
 
@@ -33,8 +34,10 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from mapapi.core.errors import ConflictError, MapError
+from mapapi.core.errors import ConflictError
 from mapapi.lookup.spatial import BBox
+from mapbench.demo.aligning import align_missions
+from mapbench.demo.errors import DemoFailed
 from mapbench.demo.swarm import LocalSwarm, SwarmPeer
 
 Json = Any
@@ -47,16 +50,9 @@ PREFIX = "tunnels-"
 QUERY_BOX = (-15.0, -15.0, -15.0, 15.0, 15.0, 15.0)
 """Metres around the origin of the map frame, where every robot's trajectory begins."""
 VIEW = "demo"
-ALIGN_VIEW = "align"
-FRAMES_WAIT_S = 30.0
-"""How long a peer may take to read the places of its missions once aligned."""
 MAP_PNG, QUERY_PNG = "tunnels-map.png", "tunnels-query.png"
 EDITS = ((0.5, 0.0, 0.0), (0.0, 0.0, 0.3))
 """How the first and the last peer move the vertex (metres in x, y, z)."""
-
-
-class DemoFailed(MapError):
-    """The swarm did not do what the demo shows (a bug: see the peers' logs)."""
 
 
 def _tiles_in_box(mission: Json) -> list[Json]:
@@ -290,49 +286,7 @@ class Demo:
         }
 
     async def _align(self, missions: list[Json]) -> Json:
-        aligner = self.peers[-1]
-        done = await aligner.call("align", view=ALIGN_VIEW, missions=[f"{PREFIX}*"])
-        before, after = done["rms_before"], done["rms_after"]
-        self.progress(
-            "info",
-            f"{aligner.name} placed {len(done['frames'])} missions in the world frame of "
-            f"{done['anchor']}: {done['inliers']} of {done['edges']} inter-robot edges kept, "
-            f"their RMS {before['metres']:.1f} m -> {after['metres']:.2f} m",
-        )
-        if done["unaligned"]:
-            raise DemoFailed(f"missions left unaligned: {', '.join(done['unaligned'])}")
-        seen = {}
-        for peer in self.peers:
-            own = sorted(m["name"] for m in missions if m["peer"] == peer.name)
-            seen[peer.name] = await self._frames_arrive(peer, own)
-            self.progress("info", f"{peer.name} reads the places of {', '.join(own)}")
-        return {
-            "peer": aligner.name,
-            "anchor": done["anchor"],
-            "missions": [f["mission"] for f in done["frames"]],
-            "edges": done["edges"],
-            "inliers": done["inliers"],
-            "rms_before": before,
-            "rms_after": after,
-            "commit": done["commit"],
-            "seen": seen,
-        }
-
-    async def _frames_arrive(self, peer: SwarmPeer, own: list[str]) -> float:
-        """Seconds until `peer` reads a world place for each of `own` (its missions),
-        asking again until `FRAMES_WAIT_S` passed.
-
-        Raises:
-            DemoFailed: it did not in time.
-        """
-        started = time.perf_counter()
-        while True:
-            listed = (await peer.call("missions", frame="world"))["missions"]
-            if set(own) <= {m["name"] for m in listed if m.get("aligned")}:
-                return round(time.perf_counter() - started, 3)
-            if time.perf_counter() - started > FRAMES_WAIT_S:
-                raise DemoFailed(f"{peer.name} never read the places of {', '.join(own)}")
-            await asyncio.sleep(0.05)  # a poll: the frames come by replication
+        return await align_missions(self.peers, f"{PREFIX}*", list(QUERY_BOX), self.progress)
 
     async def _plot(self, missions: list[Json]) -> dict[str, str]:
         drawer = self.peers[-1]

@@ -99,8 +99,8 @@ def _render(summary: dict[str, Any]) -> None:
         f"{align['peer']} aligned {len(align['missions'])} missions in the world frame of "
         f"{align['anchor']}: {align['inliers']} of {align['edges']} inter-robot edges kept, their "
         f"RMS {align['rms_before']['metres']:.1f} m before, {align['rms_after']['metres']:.2f} m "
-        f"after; every peer read the places of its own missions "
-        f"(slowest in {max(align['seen'].values()):.2f} s)"
+        f"after; every peer's watch received the places "
+        f"(the last {max(align['seen'].values()):.2f} s after the commit)"
     )
     timings, moved = summary["timings"], summary["bytes_by_step"]
     render.table(

@@ -130,7 +130,7 @@ def test_the_totals_add_up(demo: tuple[dict[str, Any], Path]) -> None:
     assert summary["timings"]["total"] >= sum(summary["timings"][s] for s in steps[:-1])
 
 
-def test_one_peer_aligned_every_mission_and_every_peer_read_its_own_places(
+def test_one_peer_aligned_every_mission_and_every_peers_watch_received_the_places(
     demo: tuple[dict[str, Any], Path],
 ) -> None:
     summary, _ = demo
