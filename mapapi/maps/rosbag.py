@@ -278,7 +278,11 @@ def _choose(connections: Iterable[Any], topics: Sequence[str], source: str) -> l
     for connection in everything:
         wanted = connection.topic in topics if topics else connection.msgtype in supported
         if connection.msgtype == msgs.OCCUPANCY_GRID and not topics:
-            log.warning("topic %s: occupancy grids are not imported yet", connection.topic)
+            log.warning(
+                "topic %s skipped: occupancy grids (%s) are not imported yet",
+                connection.topic,
+                connection.msgtype,
+            )
         if wanted or connection.msgtype in msgs.TF_TYPES:
             chosen.append(connection)
     return chosen

@@ -15,7 +15,9 @@ from tests.cli.conftest import Mapctl
 
 pytest.importorskip("rosbags")
 
-LOG = Path(__file__).resolve().parents[2] / "sample_maps" / "laser_logs" / "intel-head.clf.bz2"
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
+LOG = SAMPLES / "laser_logs" / "intel-head.clf.bz2"
+TUNNELS = SAMPLES / "kimera_multi_tunnels_8robots"
 EXIT_USAGE = 2
 
 
@@ -31,10 +33,10 @@ def read_back(folder: Path) -> dict[str, list[tuple[int, Any]]]:
     return found
 
 
-def tum_rows(mapctl: Mapctl, mission: str, tmp_path: Path) -> list[list[float]]:
+def tum_rows(mapctl: Mapctl, mission: str, tmp_path: Path, *options: str) -> list[list[float]]:
     """The stored poses of `mission`, as its TUM export gives them (bit for bit)."""
     target = tmp_path / f"{mission}.tum"
-    mapctl("export", mission, "-o", str(target))
+    mapctl("export", mission, "-o", str(target), *options)
     return [[float(v) for v in line.split()] for line in target.read_text().splitlines()]
 
 
@@ -147,3 +149,20 @@ class TestExport:
         assert "a bag is a new folder" in taken.err
         unnamed = mapctl.main("export", "run-odom", "-o", str(tmp_path / "folder"))
         assert unnamed.code == EXIT_USAGE
+
+    def test_the_world_frame_moves_the_poses_as_tum_does(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        pytest.importorskip("gtsam", reason="the registration extra (make test installs it)")
+        mapctl("import", str(TUNNELS))
+        mapctl("align", "-m", "robot1", "-m", "robot3", "--anchor", "robot3")
+        out = tmp_path / "world"
+        info = mapctl.json(
+            "export", "robot1", "-o", str(out), "--format", "bag", "--frame", "world"
+        )
+        assert (info["frame"], info["time"]) == ("world", "index")
+        stored = tum_rows(mapctl, "robot1", tmp_path, "--frame", "world")
+        poses = [message for _, message in read_back(out)["/robot1/pose"]]
+        assert {p.header.frame_id for p in poses} == {"world"}
+        got = [[m.pose.position.x, m.pose.position.y, m.pose.position.z] for m in poses]
+        assert got == [row[1:4] for row in stored]
