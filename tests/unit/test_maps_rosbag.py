@@ -89,6 +89,13 @@ class TestChoices:
         found = read_bag(path, ["/points"], mission="robot7-", robot="r7")
         assert [(s.name, s.robot) for s in found] == [("robot7-points", "r7")]
 
+    def test_progress_counts_messages_to_the_total(self, tmp_path: Path) -> None:
+        path = bag_at(tmp_path, "sqlite3", poses=2_500, cloud_every=0)
+        seen: list[tuple[int, int]] = []
+        read_bag(path, progress=lambda done, total: seen.append((done, total)))
+        total = 1 + 2_500 + 1  # /tf_static, /odom, /path
+        assert seen == [(1_000, total), (2_000, total), (total, total)]
+
     def test_tf_names_the_frame_when_the_header_has_none(self, tmp_path: Path) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
