@@ -28,8 +28,8 @@ $(DEMO_STAMP): pyproject.toml | $(PY)
 
 # The test set holds the demo set, so it marks both as installed.
 $(TEST_STAMP): pyproject.toml | $(PY)
-	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy, evo), matplotlib, open3d-cpu for point clouds and gtsam for registration"
-	@$(PY) -m pip install --quiet -e '.[dev,plot,pointcloud,registration]'
+	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy, evo), matplotlib, open3d-cpu for point clouds, gtsam for registration and rosbags for ROS bags"
+	@$(PY) -m pip install --quiet -e '.[dev,plot,pointcloud,registration,rosbag]'
 	@bash scripts/ensure-syslibs.sh
 	@touch $@ $(DEMO_STAMP)
 

@@ -26,6 +26,7 @@ from mapapi.maps.frames import MISSION, frame_reads, graph_in
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.labels import map_labels
+from mapapi.maps.schema import CLOUDS
 from mapapi.maps.stored import CLOUD_READ, cloud_at, graph_at
 from mapapi.maps.trajectory import TRAJECTORY_FORMATS, trajectory_of, write_kitti, write_tum
 from mapapi.service.peer import Peer
@@ -40,8 +41,9 @@ P = ParamSpec("P")
 T = TypeVar("T")
 
 
-EXPORT_FORMATS = ("g2o", *TRAJECTORY_FORMATS, *CLOUD_FORMATS)
-_BY_SUFFIX = {f".{fmt}": fmt for fmt in EXPORT_FORMATS}
+BAG = "bag"  # a ROS 2 bag: a folder, so no extension names it (`mapapi.maps.bag_export`)
+EXPORT_FORMATS = ("g2o", *TRAJECTORY_FORMATS, *CLOUD_FORMATS, BAG)
+_BY_SUFFIX = {f".{fmt}": fmt for fmt in EXPORT_FORMATS if fmt != BAG}
 _AMBIGUOUS = {".txt": TRAJECTORY_FORMATS}  # TUM and KITTI files are both often .txt
 
 
@@ -81,6 +83,8 @@ def export_reads(fmt: str, frame: str = MISSION) -> tuple[str, ...]:
     Raises:
         UsageError: an unknown frame, or a cloud in the world frame.
     """
+    if fmt == BAG:  # poses and points alike
+        return (*frame_reads(frame), CLOUDS)
     if fmt not in CLOUD_FORMATS:
         return frame_reads(frame)
     if frame != MISSION:
@@ -90,16 +94,21 @@ def export_reads(fmt: str, frame: str = MISSION) -> tuple[str, ...]:
 
 def export_mission(
     peer: Peer, time: int, mission: str, target: Path, fmt: str, frame: str = MISSION
-) -> dict[str, int | str]:
+) -> dict[str, Any]:
     """Write `mission` as of `time` to `target` in `fmt` (`export_format`): a
     graph as g2o (2D when it is planar), its poses as a TUM or KITTI trajectory
-    (`mapapi.maps.trajectory`), a cloud as PLY or PCD; what was written. A
-    graph's poses are in `frame` (`frames.graph_in`).
+    (`mapapi.maps.trajectory`), a cloud as PLY or PCD, poses and points as a
+    ROS 2 bag (`mapapi.maps.bag_export`); what was written. A graph's poses are
+    in `frame` (`frames.graph_in`).
 
     Raises:
         UsageError: the mission has nothing of that kind, or no place in `frame`.
         MapImportError: no such mission.
     """
+    if fmt == BAG:
+        from mapapi.maps.bag_export import export_bag  # numpy and rosbags: for bags only
+
+        return export_bag(peer, time, mission, target, frame)
     if fmt in CLOUD_FORMATS:
         cloud = cloud_at(peer, time, mission)
         if len(cloud.points) == 0:

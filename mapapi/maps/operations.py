@@ -28,6 +28,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -121,6 +122,7 @@ class MapOperations:
         mission: str | None = None,
         robot: str | None = None,
         voxel: float | None = None,
+        topics: list[str] | None = None,
     ) -> Json:
         """Import a map file or Kimera folder: parse it all, then one commit per
         mission; a malformed file commits nothing (the error names the line)."""
@@ -136,9 +138,8 @@ class MapOperations:
         started = time.perf_counter()
         self._imports[path] = (0, 0)
         try:
-            sources = await asyncio.to_thread(
-                read_source, source, fmt, mission=mission, robot=robot, voxel=voxel, progress=report
-            )
+            read = partial(read_source, source, fmt, mission=mission, robot=robot, voxel=voxel)
+            sources = await asyncio.to_thread(read, topics=topics or (), progress=report)
             results = await import_missions(self.peer, sources, report)
         finally:
             self._imports.pop(path, None)

@@ -114,3 +114,17 @@ def compose(a: Pose, b: Pose) -> Pose:
     ow = qw * rw - qx * rx - qy * ry - qz * rz
     norm = math.sqrt(ox * ox + oy * oy + oz * oz + ow * ow)
     return (tx, ty, tz, ox / norm, oy / norm, oz / norm, ow / norm)
+
+
+def inverse(pose: Pose) -> Pose:
+    """The inverse of a pose: the parent frame's origin seen from the pose's frame,
+    so that `compose(inverse(a), b)` is `b` relative to `a`."""
+    x, y, z, qx, qy, qz, qw = pose
+    # rotate -t by the conjugate quaternion (the same formula as `compose`)
+    cx = qy * z - qz * y - qw * x
+    cy = qz * x - qx * z - qw * y
+    cz = qx * y - qy * x - qw * z
+    tx = -x + 2.0 * (-qy * cz + qz * cy)
+    ty = -y + 2.0 * (-qz * cx + qx * cz)
+    tz = -z + 2.0 * (-qx * cy + qy * cx)
+    return (tx, ty, tz, -qx, -qy, -qz, qw)

@@ -5,14 +5,16 @@ Formats: `g2o` (one pose graph, or one per robot when its ids are GTSAM
 `kimera-csv` (a folder of `robot*/measurements.csv`, one mission per robot, or
 one robot's CSV file), `gtsam-landmarks` (GTSAM's ODOMETRY/LANDMARK text),
 `ply` and `pcd` (one point cloud), `carmen` (a laser log, `.clf` or `.clf.bz2`:
-a trajectory and its scans). The format follows from the extension (a folder
-is a DGS set when it holds `<n>.g2o` files, else a Kimera set; a `.txt` file is
-GTSAM landmark text when its first record says so) unless given.
+a trajectory and its scans), `rosbag` (a ROS 1 `.bag` or a ROS 2 bag's folder:
+a mission per pose or point cloud topic, `mapapi.maps.rosbag`). The format
+follows from the extension (a folder is a ROS 2 bag when it holds
+`metadata.yaml`, a DGS set when it holds `<n>.g2o` files, else a Kimera set; a
+`.txt` file is GTSAM landmark text when its first record says so) unless given.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from mapapi.core.errors import UsageError
@@ -24,22 +26,26 @@ from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import EdgeKind, MissionGraph
 from mapapi.maps.importer import MapSource, rename
 from mapapi.maps.kimera import KimeraReader, read_kimera
+from mapapi.maps.rosbag import FORMAT as ROSBAG
+from mapapi.maps.rosbag import is_bag, read_bag
 from mapapi.maps.text_file import read_text
 
 Progress = Callable[[int, int], None]  # (units read, units in all; 0 while unknown)
 
-FORMATS = ("g2o", "kimera-csv", gtsam_text.FORMAT, *CLOUD_FORMATS, "carmen")
+FORMATS = ("g2o", "kimera-csv", gtsam_text.FORMAT, *CLOUD_FORMATS, "carmen", ROSBAG)
 _BY_SUFFIX = {".g2o": "g2o", ".csv": "kimera-csv", ".ply": "ply", ".pcd": "pcd", ".clf": "carmen"}
 
 
 def detect_format(path: str | Path) -> str:
-    """The format of `path` by its extension (a folder is a DGS or Kimera set;
-    a `.txt` file GTSAM landmark text if its first record says so).
+    """The format of `path` by its extension (a folder is a ROS 2 bag, a DGS or
+    a Kimera set; a `.txt` file GTSAM landmark text if its first record says so).
 
     Raises:
         UsageError: an extension no reader knows.
     """
     path = Path(path)
+    if is_bag(path):
+        return ROSBAG
     if path.is_dir():
         return "g2o" if robot_files(path) else "kimera-csv"
     if [s.lower() for s in path.suffixes[-2:]] == [".clf", ".bz2"]:
@@ -62,6 +68,7 @@ def read_source(
     mission: str | None = None,
     robot: str | None = None,
     voxel: float | None = None,
+    topics: Sequence[str] = (),
     progress: Progress | None = None,
 ) -> list[MapSource]:
     """Read a map file (or Kimera folder) as the missions it holds.
@@ -72,7 +79,8 @@ def read_source(
             a prefix of each robot's mission name.
         robot: the robot's name (only for a source of one mission).
         voxel: point clouds only: the voxel side in metres (0 keeps every
-            point; default `DEFAULT_VOXEL`).
+            point; default `DEFAULT_VOXEL`, and for a bag's clouds 0).
+        topics: ROS bags only: the topics to read (default: every supported one).
         progress: called with (units read, units in all or 0 while unknown).
 
     Raises:
@@ -85,6 +93,10 @@ def read_source(
     fmt = fmt or detect_format(path)
     if fmt not in FORMATS:
         raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+    if fmt == ROSBAG:
+        return read_bag(path, topics, mission, robot or "", voxel=voxel or 0.0, progress=progress)
+    if topics:
+        raise UsageError("--topics applies to ROS bags only")
     if fmt in CLOUD_FORMATS:
         cloud = read_cloud(
             path,

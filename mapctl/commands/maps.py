@@ -9,8 +9,8 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen")  # source.FORMATS
-EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd")  # mapapi.maps.jobs.EXPORT_FORMATS
+FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosbag")
+EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag")  # mapapi.maps.jobs.EXPORT_FORMATS
 
 
 def _bbox_text(box: list[float] | None) -> str:
@@ -42,8 +42,9 @@ def _holders_text(holders: list[dict[str, Any]]) -> str:
     "--format",
     "fmt",
     type=click.Choice(FORMATS),
-    help="The file's format (default: by extension; a folder is a DGS set of <n>.g2o "
-    "files or a Kimera set; a .txt file GTSAM landmark text if its first record is one).",
+    help="The file's format (default: by extension; a folder is a ROS 2 bag when it holds "
+    "metadata.yaml, a DGS set of <n>.g2o files or a Kimera set; a .txt file GTSAM landmark "
+    "text if its first record is one).",
 )
 @click.option(
     "--mission",
@@ -55,7 +56,15 @@ def _holders_text(holders: list[dict[str, Any]]) -> str:
     "--voxel",
     type=click.FloatRange(0),
     help="Point clouds: keep one point per voxel of this side in metres; 0 keeps all "
-    "[default: 0.05].",
+    "[default: 0.05; for a bag's clouds 0].",
+)
+@click.option(
+    "--topics",
+    "topics",
+    multiple=True,
+    metavar="TOPIC[,TOPIC...]",
+    help="ROS bags: read these topics only (repeat, or separate with commas; default: every "
+    "pose, path, odometry and point cloud topic).",
 )
 @json_option
 @pass_session
@@ -66,11 +75,13 @@ def import_map(
     mission: str | None,
     robot: str | None,
     voxel: float | None,
+    topics: tuple[str, ...],
     as_json: bool,
 ) -> None:
     """Import a map FILE: g2o pose graph (one mission per robot when its ids are
     GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
-    cloud, CARMEN laser log (.clf, .clf.bz2).
+    cloud, CARMEN laser log (.clf, .clf.bz2), ROS bag (.bag, or a ROS 2 bag's
+    folder: one mission per pose or point cloud topic).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -78,7 +89,9 @@ def import_map(
     from mapctl import render
 
     path = str(file.resolve())
-    args = {"path": path, "fmt": fmt, "mission": mission, "robot": robot, "voxel": voxel}
+    chosen = [t for text in topics for t in text.split(",") if t]
+    args: dict[str, Any] = {"path": path, "fmt": fmt, "mission": mission, "robot": robot}
+    args |= {"voxel": voxel, "topics": chosen or None}
     with render.transfer(f"importing {file.name}") as show:
         info = session.call_with_progress(
             "import_map",
@@ -121,13 +134,14 @@ def _output_option(text: str) -> Any:
 @click.argument("mission")
 @_output_option(
     "The file to write: .g2o for a pose graph, .tum or .kitti for its trajectory, "
-    ".ply or .pcd for a point cloud."
+    ".ply or .pcd for a point cloud; with --format bag, the ROS 2 bag's new folder."
 )
 @click.option(
     "--format",
     "fmt",
     type=click.Choice(EXPORT_FORMATS),
-    help="The format to write (default: by the extension; needed for .txt).",
+    help="The format to write (default: by the extension; needed for .txt and for bag, "
+    "a ROS 2 bag in MCAP of the poses, path and points).",
 )
 @frame_option("Write a graph's poses")
 @json_option
@@ -136,7 +150,8 @@ def export_map(
     session: Session, mission: str, output: Path, fmt: str | None, frame: str, as_json: bool
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
-    its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD)."""
+    its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD),
+    poses, path and points as a ROS 2 bag (MCAP)."""
     from mapctl import render
 
     info = session.call(
@@ -145,7 +160,9 @@ def export_map(
     if as_json:
         render.emit_json(info)
         return
-    if info["format"] == "g2o":
+    if info["format"] == "bag":
+        what = f"{info['poses']} poses, {info['points']} points on {', '.join(info['topics'])}"
+    elif info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
         if info.get("landmarks"):
             what += f", {info['landmarks']} landmarks"

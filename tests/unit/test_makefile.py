@@ -71,7 +71,7 @@ class TestInstallSets:
     def test_test_installs_everything_and_marks_the_demo_set_done(self) -> None:
         stamp, recipe = install("test")
         assert stamp == "$(TEST_STAMP)"
-        assert "'.[dev,plot,pointcloud,registration]'" in pip_line(recipe)
+        assert "'.[dev,plot,pointcloud,registration,rosbag]'" in pip_line(recipe)
         assert any("ensure-syslibs" in line for line in recipe)
         assert any(line.startswith("touch") and "$(DEMO_STAMP)" in line for line in recipe)
 

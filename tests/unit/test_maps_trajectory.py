@@ -138,8 +138,10 @@ class TestFormats:
     def test_an_unknown_extension_or_format_is_refused(self) -> None:
         with pytest.raises(UsageError, match="pass --format"):
             export_format(Path("poses.csv"))
-        with pytest.raises(UsageError, match="unknown format 'bag'"):
-            export_format(Path("poses.bag"), "bag")
+        with pytest.raises(UsageError, match="unknown format 'grid'"):
+            export_format(Path("poses.pgm"), "grid")
+        with pytest.raises(UsageError, match="pass --format"):
+            export_format(Path("poses.bag"))  # a ROS 1 bag's name: we write ROS 2 folders
         with pytest.raises(UsageError, match=r"must end in \.ply"):
             export_format(Path("cloud.txt"), "ply")
 

@@ -1,0 +1,195 @@
+"""Small synthetic ROS bags, written with `rosbags`: for the tests, the guide's
+examples and `mapctl bench import --file`.
+
+A bag holds a robot driving a helix: `nav_msgs/Odometry` on `/odom` (frame `odom`,
+child `base_link`), the same poses as one `nav_msgs/Path` on `/path` (frame
+`map`), `/tf_static` (map -> odom) and, every `cloud_every` poses, a ring of
+points around the robot as `sensor_msgs/PointCloud2` on `/points` (frame `odom`)
+and, if asked, an `nav_msgs/OccupancyGrid` on `/map`.
+
+    python -m mapbench.bags run1.bag --poses 200          # ROS 1
+    python -m mapbench.bags run2 --storage mcap          # ROS 2, a folder
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mapapi.maps.bag_export import cloud_message, pose_message
+from mapapi.maps.se3 import Pose
+
+STORAGES = ("ros1", "sqlite3", "mcap")
+
+
+def helix_pose(i: int) -> Pose:
+    """The robot's i-th pose: x, y, z, qx, qy, qz, qw (yaw along the helix)."""
+    angle = 0.05 * i
+    yaw = angle + math.pi / 2
+    return (
+        10 * math.cos(angle),
+        10 * math.sin(angle),
+        0.01 * i,
+        0.0,
+        0.0,
+        math.sin(yaw / 2),
+        math.cos(yaw / 2),
+    )
+
+
+class Messages:
+    """Builds messages of one typestore (ROS 1 headers have a `seq`, ROS 2 not);
+    each method returns one message, stamped `ns` nanoseconds."""
+
+    def __init__(self, store: Any, ros1: bool) -> None:
+        self.types, self.ros1 = store.types, ros1
+
+    def header(self, ns: int, frame: str) -> Any:
+        """A `std_msgs/Header`."""
+        stamp = self.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+        if self.ros1:
+            return self.types["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
+        return self.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    def pose(self, values: Pose) -> Any:
+        """A `geometry_msgs/Pose` of a pose 7-tuple."""
+        return pose_message(self.types, values)
+
+    def odometry(self, ns: int, values: Pose) -> Any:
+        """A `nav_msgs/Odometry` from odom to base_link."""
+        t = self.types
+        zero = t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+        twist = t["geometry_msgs/msg/Twist"](linear=zero, angular=zero)
+        return t["nav_msgs/msg/Odometry"](
+            header=self.header(ns, "odom"),
+            child_frame_id="base_link",
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=self.pose(values), covariance=np.zeros(36)
+            ),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
+        )
+
+    def path(self, stamps: list[int], poses: list[Pose]) -> Any:
+        """A `nav_msgs/Path` of every pose, in map."""
+        stamped = self.types["geometry_msgs/msg/PoseStamped"]
+        items = [
+            stamped(header=self.header(ns, "map"), pose=self.pose(p))
+            for ns, p in zip(stamps, poses, strict=True)
+        ]
+        return self.types["nav_msgs/msg/Path"](header=self.header(stamps[-1], "map"), poses=items)
+
+    def cloud(self, ns: int, points: np.ndarray, frame: str = "odom") -> Any:
+        """A `sensor_msgs/PointCloud2` of float32 x, y, z."""
+        return cloud_message(self.types, self.header(ns, frame), points)
+
+    def tf(self, ns: int, parent: str, child: str) -> Any:
+        """A `tf2_msgs/TFMessage` of one identity transform."""
+        t = self.types
+        transform = t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        stamped = t["geometry_msgs/msg/TransformStamped"](
+            header=self.header(ns, parent), child_frame_id=child, transform=transform
+        )
+        return t["tf2_msgs/msg/TFMessage"](transforms=[stamped])
+
+    def grid(self, ns: int) -> Any:
+        """A 4 x 4 free `nav_msgs/OccupancyGrid`."""
+        t = self.types
+        info = t["nav_msgs/msg/MapMetaData"](
+            map_load_time=self.header(ns, "").stamp,
+            resolution=0.05,
+            width=4,
+            height=4,
+            origin=self.pose((0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)),
+        )
+        cells = np.zeros(16, dtype=np.int8)
+        return t["nav_msgs/msg/OccupancyGrid"](header=self.header(ns, "map"), info=info, data=cells)
+
+
+def ring(center: Pose, count: int) -> np.ndarray:
+    """`count` points on a 2 m circle around `center`'s position, in its frame's axes."""
+    angles = np.linspace(0.0, 2 * math.pi, count, endpoint=False)
+    x, y, z = center[:3]
+    return np.stack([x + 2 * np.cos(angles), y + 2 * np.sin(angles), np.full(count, z)], axis=1)
+
+
+def write_bag(
+    path: str | Path,
+    storage: str = "ros1",
+    *,
+    poses: int = 100,
+    cloud_every: int = 10,
+    cloud_points: int = 64,
+    grid: bool = False,
+) -> Path:
+    """Write a helix bag (see the module docstring) at `path`: a `.bag` file for
+    `ros1`, a folder for `sqlite3` and `mcap`. Returns `path`."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    path = Path(path)
+    ros1 = storage == "ros1"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if ros1:  # rosbags' Noetic store lacks tf2_msgs, which ROS 1 bags use for /tf
+        tf = "geometry_msgs/TransformStamped[] transforms"
+        store.register(get_types_from_msg(tf, "tf2_msgs/msg/TFMessage"))
+    build = Messages(store, ros1)
+    stamps = [10**9 * 1_700_000_000 + i * 10**8 for i in range(poses)]  # 10 Hz
+    track = [helix_pose(i) for i in range(poses)]
+    with _writer(path, storage) as writer:
+
+        def connect(topic: str, msgtype: str) -> Any:
+            return writer.add_connection(topic, msgtype, typestore=store)
+
+        def put(connection: Any, ns: int, message: Any) -> None:
+            raw = store.serialize_ros1 if ros1 else store.serialize_cdr
+            writer.write(connection, ns, raw(message, connection.msgtype))
+
+        tf = connect("/tf_static", "tf2_msgs/msg/TFMessage")
+        odom = connect("/odom", "nav_msgs/msg/Odometry")
+        cloud = connect("/points", "sensor_msgs/msg/PointCloud2") if cloud_every else None
+        put(tf, stamps[0], build.tf(stamps[0], "map", "odom"))
+        for i, (ns, pose) in enumerate(zip(stamps, track, strict=True)):
+            put(odom, ns, build.odometry(ns, pose))
+            if cloud is not None and i % cloud_every == 0:
+                put(cloud, ns, build.cloud(ns, ring(pose, cloud_points)))
+        if poses:
+            put(connect("/path", "nav_msgs/msg/Path"), stamps[-1], build.path(stamps, track))
+        if grid:
+            put(connect("/map", "nav_msgs/msg/OccupancyGrid"), stamps[0], build.grid(stamps[0]))
+    return path
+
+
+def _writer(path: Path, storage: str) -> Any:
+    if storage == "ros1":
+        from rosbags.rosbag1 import Writer as Writer1
+
+        return Writer1(path)
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    return Writer(path, version=9, storage_plugin=plugin)
+
+
+def main() -> None:
+    """Write one helix bag (`python -m mapbench.bags PATH [--storage ...]`)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("path", type=Path)
+    parser.add_argument("--storage", choices=STORAGES, default="ros1")
+    parser.add_argument("--poses", type=int, default=100)
+    parser.add_argument("--cloud-every", type=int, default=10, help="0: no clouds")
+    parser.add_argument("--cloud-points", type=int, default=64)
+    parser.add_argument("--grid", action="store_true", help="add an OccupancyGrid on /map")
+    args = parser.parse_args()
+    options = {name: getattr(args, name) for name in ("poses", "cloud_every", "cloud_points")}
+    write_bag(args.path, args.storage, grid=args.grid, **options)
+    print(f"wrote {args.path} ({args.storage}): {args.poses} poses")
+
+
+if __name__ == "__main__":
+    main()

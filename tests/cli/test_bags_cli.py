@@ -1,0 +1,168 @@
+"""`mapctl import` of ROS bags and `mapctl export --format bag` (issue 17 §3, §4):
+bags written by `rosbags` imported into a real repository, and exported bags
+read back with `rosbags` and compared with the stored poses and points."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from mapbench.bags import STORAGES, write_bag
+from tests.cli.conftest import Mapctl
+
+pytest.importorskip("rosbags")
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_maps"
+LOG = SAMPLES / "laser_logs" / "intel-head.clf.bz2"
+TUNNELS = SAMPLES / "kimera_multi_tunnels_8robots"
+EXIT_USAGE = 2
+
+
+def read_back(folder: Path) -> dict[str, list[tuple[int, Any]]]:
+    """topic -> (record time in ns, message) of every message of a bag, read by rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    found: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([folder]) as reader:
+        for connection, ns, raw in reader.messages():
+            message = reader.deserialize(raw, connection.msgtype)
+            found.setdefault(connection.topic, []).append((ns, message))
+    return found
+
+
+def tum_rows(mapctl: Mapctl, mission: str, tmp_path: Path, *options: str) -> list[list[float]]:
+    """The stored poses of `mission`, as its TUM export gives them (bit for bit)."""
+    target = tmp_path / f"{mission}.tum"
+    mapctl("export", mission, "-o", str(target), *options)
+    return [[float(v) for v in line.split()] for line in target.read_text().splitlines()]
+
+
+class TestImport:
+    @pytest.mark.parametrize("storage", STORAGES)
+    def test_every_storage_imports_into_a_repository(
+        self, mapctl: Mapctl, tmp_path: Path, storage: str
+    ) -> None:
+        bag = write_bag(tmp_path / ("run.bag" if storage == "ros1" else "run"), storage, poses=40)
+        info = mapctl.json("import", str(bag), "--robot", "r1")
+        assert info["format"] == "rosbag"
+        counts = {
+            m["name"]: (m["robot"], m["vertices"], m["edges"], m["points"])
+            for m in info["missions"]
+        }
+        assert counts == {
+            "run-odom": ("r1", 40, 39, 0),
+            "run-path": ("r1", 40, 39, 0),
+            "run-points": ("r1", 0, 0, 4 * 64),
+        }
+        assert info["elements"] == 2 * (40 + 39)
+        listed = {m["name"]: m["kind"] for m in mapctl.json("missions")["missions"]}
+        assert listed == {"run-odom": "graph", "run-path": "graph", "run-points": "cloud"}
+        rows = tum_rows(mapctl, "run-odom", tmp_path)
+        assert rows[3][0] == pytest.approx(1_700_000_000.3, abs=1e-6)  # the header's stamp
+
+    def test_topics_choose_separated_by_commas_or_repeated(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        bag = write_bag(tmp_path / "run.bag", "ros1", poses=5)
+        one = mapctl.json("import", str(bag), "--topics", "/odom,/points", "--mission", "a-")
+        assert [m["name"] for m in one["missions"]] == ["a-odom", "a-points"]
+        two = mapctl.json(
+            "import", str(bag), "--topics", "/path", "--topics", "/odom", "--mission", "b-"
+        )
+        assert sorted(m["name"] for m in two["missions"]) == ["b-odom", "b-path"]
+
+    def test_bad_bags_and_topics_exit_2_and_commit_nothing(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        junk = tmp_path / "junk.bag"
+        junk.write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+        outcome = mapctl.main("import", str(junk))
+        assert outcome.code == EXIT_USAGE
+        assert outcome.err_lines[0].startswith(f"error: {junk}: not a ROS bag rosbags can read")
+        grid = write_bag(tmp_path / "grid", "mcap", poses=3, grid=True)
+        asked = mapctl.main("import", str(grid), "--topics", "/map")
+        assert asked.code == EXIT_USAGE
+        assert "occupancy grids (nav_msgs/msg/OccupancyGrid) are not imported yet" in asked.err
+        assert mapctl.json("log") == []
+
+
+class TestExport:
+    def test_a_trajectory_round_trips_through_a_bag(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        mapctl("import", str(write_bag(tmp_path / "run", "sqlite3", poses=30)))
+        out = tmp_path / "out"
+        info = mapctl.json("export", "run-odom", "-o", str(out), "--format", "bag")
+        assert info == {
+            "mission": "run-odom",
+            "path": str(out),
+            "format": "bag",
+            "frame": "mission",
+            "poses": 30,
+            "points": 0,
+            "time": "timestamp",
+            "topics": ["/run_odom/pose", "/run_odom/path"],
+        }
+        assert (out / "out.mcap").is_file()
+        topics = read_back(out)
+        stored = tum_rows(mapctl, "run-odom", tmp_path)
+        poses = [message for _, message in topics["/run_odom/pose"]]
+        (path_message,) = [message for _, message in topics["/run_odom/path"]]
+        assert len(poses) == len(path_message.poses) == len(stored)
+        for row, pose, in_path in zip(stored, poses, path_message.poses, strict=True):
+            p, q = pose.pose.position, pose.pose.orientation
+            assert [p.x, p.y, p.z, q.x, q.y, q.z, q.w] == row[1:]  # bit for bit
+            stamp = pose.header.stamp.sec + pose.header.stamp.nanosec * 1e-9
+            assert stamp == pytest.approx(row[0], abs=1e-6)
+            assert pose.header.frame_id == "run-odom/odom"
+            assert in_path.pose.position.x == p.x
+        again = mapctl.json("import", str(out), "--mission", "back-")
+        assert [m["vertices"] for m in again["missions"]] == [30, 30]
+
+    def test_laser_scans_become_clouds_stamped_by_their_pose(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        mapctl("import", str(LOG), "--mission", "lab")
+        out = tmp_path / "lab"
+        info = mapctl.json("export", "lab", "-o", str(out), "--format", "bag")
+        assert (info["poses"], info["points"]) == (671, 109_635)
+        topics = read_back(out)
+        clouds = topics["/lab/cloud"]
+        pose_times = {ns for ns, _ in topics["/lab/pose"]}
+        assert {ns for ns, _ in clouds} <= pose_times
+        points = sum(m.width for _, m in clouds)
+        assert points == 109_635
+        first = np.frombuffer(clouds[0][1].data.tobytes(), "<f4").reshape(-1, 3)
+        assert np.isfinite(first).all()
+
+    def test_refusals(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        mapctl("import", str(write_bag(tmp_path / "run.bag", "ros1", poses=3)))
+        world = mapctl.main(
+            "export", "run-odom", "-o", str(tmp_path / "w"), "--format", "bag", "--frame", "world"
+        )
+        assert world.code == EXIT_USAGE
+        assert "no place in the world frame yet" in world.err
+        (tmp_path / "taken").write_text("")
+        taken = mapctl.main("export", "run-odom", "-o", str(tmp_path / "taken"), "--format", "bag")
+        assert taken.code == EXIT_USAGE
+        assert "a bag is a new folder" in taken.err
+        unnamed = mapctl.main("export", "run-odom", "-o", str(tmp_path / "folder"))
+        assert unnamed.code == EXIT_USAGE
+
+    def test_the_world_frame_moves_the_poses_as_tum_does(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        pytest.importorskip("gtsam", reason="the registration extra (make test installs it)")
+        mapctl("import", str(TUNNELS))
+        mapctl("align", "-m", "robot1", "-m", "robot3", "--anchor", "robot3")
+        out = tmp_path / "world"
+        info = mapctl.json(
+            "export", "robot1", "-o", str(out), "--format", "bag", "--frame", "world"
+        )
+        assert (info["frame"], info["time"]) == ("world", "index")
+        stored = tum_rows(mapctl, "robot1", tmp_path, "--frame", "world")
+        poses = [message for _, message in read_back(out)["/robot1/pose"]]
+        assert {p.header.frame_id for p in poses} == {"world"}
+        got = [[m.pose.position.x, m.pose.position.y, m.pose.position.z] for m in poses]
+        assert got == [row[1:4] for row in stored]

@@ -1,0 +1,184 @@
+"""Reading ROS bags as missions (`mapapi.maps.rosbag`): bags written by `rosbags`
+itself, ROS 1 and ROS 2 in SQLite3 and MCAP, read back and compared with what
+was written (`mapbench.bags`)."""
+
+from __future__ import annotations
+
+import math
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mapapi.core.errors import UsageError
+from mapapi.maps.cloud import PointCloud
+from mapapi.maps.errors import MapImportError
+from mapapi.maps.graph import EdgeKind, MissionGraph
+from mapapi.maps.rosbag import INFORMATION, read_bag
+from mapapi.maps.se3 import compose, inverse
+from mapapi.maps.source import detect_format, read_source
+from mapbench.bags import STORAGES, Messages, helix_pose, ring, write_bag
+
+pytest.importorskip("rosbags")
+
+T0 = 1_700_000_000.0
+
+
+def bag_at(tmp_path: Path, storage: str, **options: int | bool) -> Path:
+    """A helix bag of `storage` in tmp_path."""
+    name = "run.bag" if storage == "ros1" else "run"
+    return write_bag(tmp_path / name, storage, **options)  # type: ignore[arg-type]
+
+
+def by_name(sources: list[MissionGraph | PointCloud]) -> dict[str, MissionGraph | PointCloud]:
+    return {s.name: s for s in sources}
+
+
+class TestInverse:
+    def test_compose_with_the_inverse_is_the_identity(self) -> None:
+        rng = random.Random(7)
+        for _ in range(200):
+            q = [rng.gauss(0, 1) for _ in range(4)]
+            n = math.sqrt(sum(v * v for v in q))
+            pose = (rng.gauss(0, 5), rng.gauss(0, 5), rng.gauss(0, 5), *(v / n for v in q))
+            for both in (compose(inverse(pose), pose), compose(pose, inverse(pose))):
+                assert max(map(abs, both[:3])) < 1e-9
+                assert abs(abs(both[6]) - 1) < 1e-12
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+class TestEveryStorage:
+    def test_odometry_becomes_a_timed_trajectory(self, tmp_path: Path, storage: str) -> None:
+        path = bag_at(tmp_path, storage, poses=30)
+        assert detect_format(path) == "rosbag"
+        odom = by_name(read_source(path))["run-odom"]
+        assert isinstance(odom, MissionGraph)
+        assert odom.frame == "run-odom/odom"
+        assert sorted(odom.vertices) == list(range(30))
+        for i in range(30):
+            assert odom.vertices[i] == pytest.approx(helix_pose(i), abs=1e-12)
+            assert odom.timestamps[i] == pytest.approx(T0 + 0.1 * i, abs=1e-6)
+        assert [e.kind for e in odom.edges] == [EdgeKind.ODOMETRY] * 29
+        edge = odom.edges[4]
+        assert (edge.source, edge.target) == (("run-odom", 4), ("run-odom", 5))
+        assert compose(odom.vertices[4], edge.relative) == pytest.approx(odom.vertices[5])
+        assert edge.information == INFORMATION
+
+    def test_path_and_clouds(self, tmp_path: Path, storage: str) -> None:
+        path = bag_at(tmp_path, storage, poses=25, cloud_every=10, cloud_points=16)
+        found = by_name(read_bag(path))
+        assert sorted(found) == ["run-odom", "run-path", "run-points"]
+        track = found["run-path"]
+        assert isinstance(track, MissionGraph)
+        assert track.frame == "run-path/map"
+        assert (len(track.vertices), len(track.edges)) == (25, 24)
+        assert track.vertices[24] == pytest.approx(helix_pose(24))
+        cloud = found["run-points"]
+        assert isinstance(cloud, PointCloud)
+        assert cloud.frame == "run-points/odom"
+        want = np.concatenate([ring(helix_pose(i), 16) for i in (0, 10, 20)]).astype(np.float32)
+        assert np.array_equal(cloud.points, want)
+
+
+class TestChoices:
+    def test_topics_choose_and_prefix_names(self, tmp_path: Path) -> None:
+        path = bag_at(tmp_path, "mcap", poses=5)
+        found = read_bag(path, ["/points"], mission="robot7-", robot="r7")
+        assert [(s.name, s.robot) for s in found] == [("robot7-points", "r7")]
+
+    def test_progress_counts_messages_to_the_total(self, tmp_path: Path) -> None:
+        path = bag_at(tmp_path, "sqlite3", poses=2_500, cloud_every=0)
+        seen: list[tuple[int, int]] = []
+        read_bag(path, progress=lambda done, total: seen.append((done, total)))
+        total = 1 + 2_500 + 1  # /tf_static, /odom, /path
+        assert seen == [(1_000, total), (2_000, total), (total, total)]
+
+    def test_tf_names_the_frame_when_the_header_has_none(self, tmp_path: Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        build = Messages(store, ros1=False)
+        with Writer(tmp_path / "tf", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            tf = writer.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
+            odom = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=store)
+            writer.write(tf, 1, store.serialize_cdr(build.tf(1, "/world", "base_link"), tf.msgtype))
+            for i in range(3):
+                message = build.odometry(i + 2, helix_pose(i))
+                message.header.frame_id = ""
+                writer.write(odom, i + 2, store.serialize_cdr(message, odom.msgtype))
+        (graph,) = read_bag(tmp_path / "tf")
+        assert graph.frame == "tf-odom/world"
+
+    def test_a_grid_is_skipped_and_refused_when_asked_for(
+        self, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    ) -> None:
+        path = bag_at(tmp_path, "ros1", poses=5, grid=True)
+        assert "run-map" not in by_name(read_bag(path))
+        assert "/map skipped: occupancy grids" in caplog.text
+        with pytest.raises(UsageError, match=r"occupancy grids .* are not imported yet"):
+            read_bag(path, ["/map"])
+
+    def test_unknown_topics_and_types_are_refused(self, tmp_path: Path) -> None:
+        path = bag_at(tmp_path, "sqlite3", poses=5)
+        with pytest.raises(UsageError, match=r"no topic '/nope'; it has /odom, /path"):
+            read_bag(path, ["/nope"])
+        with pytest.raises(UsageError, match="tf2_msgs/msg/TFMessage, which is not imported"):
+            read_bag(path, ["/tf_static"])
+        with pytest.raises(UsageError, match="ROS bags only"):
+            read_source(tmp_path / "run" / "metadata.yaml", "g2o", topics=["/odom"])
+
+
+class TestErrors:
+    def test_a_corrupt_bag_is_a_clean_error(self, tmp_path: Path) -> None:
+        path = bag_at(tmp_path, "ros1", poses=50)
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) // 2])
+        with pytest.raises(MapImportError, match=r"run\.bag"):
+            read_bag(path)
+        (tmp_path / "junk.bag").write_bytes(b"not a bag at all")
+        with pytest.raises(MapImportError, match="not a ROS bag rosbags can read"):
+            read_bag(tmp_path / "junk.bag")
+
+    def test_a_bad_message_names_its_topic_and_index(self, tmp_path: Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        build = Messages(store, ros1=False)
+        with Writer(tmp_path / "bad", version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+            odom = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=store)
+            for i in range(5):
+                pose = helix_pose(i) if i != 3 else (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                raw = store.serialize_cdr(build.odometry(i + 1, pose), odom.msgtype)
+                writer.write(odom, i + 1, raw)
+        with pytest.raises(MapImportError, match=r"topic /odom, message 3 .*quaternion is zero"):
+            read_bag(tmp_path / "bad")
+
+    def test_a_cloud_without_z_names_its_message(self, tmp_path: Path) -> None:
+        from rosbags.rosbag1 import Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        store = get_typestore(Stores.ROS1_NOETIC)
+        message = Messages(store, ros1=True).cloud(5, np.zeros((3, 3)))
+        message.fields[2].name = "intensity"
+        with Writer(tmp_path / "c.bag") as writer:
+            points = writer.add_connection("/points", message.__msgtype__, typestore=store)
+            writer.write(points, 5, store.serialize_ros1(message, points.msgtype))
+        with pytest.raises(MapImportError, match=r"/points, message 0 .* no field 'z'"):
+            read_bag(tmp_path / "c.bag")
+
+    def test_other_imports_do_not_load_rosbags(self) -> None:
+        code = (
+            "import sys; from mapapi.maps.source import read_source; "
+            "read_source('sample_maps/pose_graphs/intel.g2o'); "
+            "print('rosbags' in sys.modules)"
+        )
+        root = Path(__file__).resolve().parents[2]
+        ran = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root
+        )
+        assert ran.stdout.strip() == "False"
