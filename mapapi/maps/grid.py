@@ -8,8 +8,9 @@ rays reaching it that ended there, hits / (hits + passes) (the counting
 model, as GMapping's cells keep it): above `OCCUPIED_P` it is
 occupied, below `FREE_P` free, else, or never reached, unknown.
 
-Casting is vectorised with numpy (a Python loop per ray, Bresenham's, would
-take minutes for the 2.4M rays of the whole Intel log). A ray enters a new
+Casting is vectorised with numpy (a Python loop per ray, Bresenham's, took
+about 50 s for the 2.4M rays of the whole Intel log, extrapolated from 20,000;
+this takes 6-9 s: docs/benchmarks.md). A ray enters a new
 cell each time it crosses a line between columns or rows, so the cells it
 crosses are its start cell and the cell after each such crossing, which are
 found without walking the ray: the k-th column line it crosses is a known x,
@@ -53,7 +54,8 @@ YAML_FREE_THRESH = 0.196
 threshold of 0.196 keeps it unknown (as ROS 1's map_saver and, since
 navigation2 PR #5278, nav2's write for trinary maps)."""
 
-_BATCH_SAMPLES = 1 << 21  # crossings cast at once: ~100 MB of temporaries
+_RAYS_AT_ONCE = 1 << 18  # rays cast at once: ~30 MB of per-ray temporaries
+_BATCH_SAMPLES = 1 << 20  # crossings of those made at once: ~100 MB of temporaries
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,6 +117,10 @@ class OccupancyCounts:
     def add_rays(self, origins: XY, ends: XY) -> None:
         """Cast a ray from each origin to its end (metres): its end cell is hit,
         the cells before it passed. Parts outside the grid are left out."""
+        for lo in range(0, len(ends), _RAYS_AT_ONCE):  # bounds the per-ray temporaries
+            self._add(origins[lo : lo + _RAYS_AT_ONCE], ends[lo : lo + _RAYS_AT_ONCE])
+
+    def _add(self, origins: XY, ends: XY) -> None:
         spec = self.spec
         corner = np.array([spec.x0, spec.y0])
         start = (np.asarray(origins, np.float64) - corner) / spec.resolution  # in cells
@@ -191,9 +197,13 @@ def _count(counts: npt.NDArray[np.int32], cells: npt.NDArray[np.int64]) -> None:
     """Add one to `counts` at each of `cells` (repeats add up)."""
     if len(cells) == 0:
         return
-    if len(counts) <= 4 * len(cells):
-        counts += np.bincount(cells, minlength=len(counts)).astype(np.int32)
-    else:  # a large grid and few cells: a full-size bincount would cost more than sorting
+    lo, hi = int(cells.min()), int(cells.max()) + 1
+    # a batch's rays come from nearby scans, so its cells span a small part of a large
+    # grid: counting over that span is a pass over it; sorting (np.unique) costs some
+    # 50 times more per cell, so it only pays when the span is much larger than the batch
+    if hi - lo <= 8 * len(cells):
+        counts[lo:hi] += np.bincount(cells - lo, minlength=hi - lo).astype(np.int32)
+    else:
         found, times = np.unique(cells, return_counts=True)
         counts[found] += times.astype(np.int32)
 
