@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mapapi.maps.align_ops import AlignOperations
+from mapapi.maps.grid_ops import GridOperations
 from mapapi.maps.labels import map_labels
 from mapapi.maps.operations import MapOperations
 from mapapi.maps.rules import map_rules
@@ -74,6 +75,7 @@ def operations(
             WatchOperations(peer),
             MapOperations(peer),
             AlignOperations(peer, views),
+            GridOperations(peer),
             DaemonOperations(on_shutdown),
             FsckOperations(peer),
             GcOperations(peer),

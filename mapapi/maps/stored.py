@@ -126,7 +126,12 @@ async def read_time(
         yield await peer.labelled_readable(MAP_LABELS, list(missions), tables, tx.begin_time)
 
 
-def _mission_row(peer: Peer, time: int, mission: str) -> Any:
+def mission_row(peer: Peer, time: int, mission: str) -> Any:
+    """The mission's row visible at `time`.
+
+    Raises:
+        MapImportError: no such mission here.
+    """
     found = rows_of(peer, time, MISSIONS, mission)
     if not found:
         raise MapImportError(
@@ -156,7 +161,7 @@ def graph_at(peer: Peer, time: int, mission: str) -> MissionGraph:
     Raises:
         MapImportError: no such mission.
     """
-    row = _mission_row(peer, time, mission)
+    row = mission_row(peer, time, mission)
     graph = MissionGraph(mission, row.robot, row.frame)
     records = [(key, 0, v) for key, v in _in_order(peer, time, VERTICES, mission)]
     records += [(key, 0, m) for key, m in _in_order(peer, time, LANDMARKS, mission)]
@@ -213,7 +218,7 @@ def cloud_at(peer: Peer, time: int, mission: str) -> PointCloud:
     Raises:
         MapImportError: no such mission.
     """
-    row = _mission_row(peer, time, mission)
+    row = mission_row(peer, time, mission)
     blocks = rows_of(peer, time, CLOUDS, mission)
     return cloud_from_blocks(mission, row.robot, row.frame, blocks)
 

@@ -208,22 +208,28 @@ def missions(session: Session, swarm: bool, frame: str, as_json: bool) -> None:
     render.table("missions", columns, rows)
 
 
+def _bbox_option(text: str) -> Any:
+    """`--bbox XMIN YMIN ZMIN XMAX YMAX ZMAX`."""
+    return click.option(
+        "--bbox", nargs=6, type=float, metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX", help=text
+    )
+
+
+def _missions_option(verb: str, default: str) -> Any:
+    """`-m/--mission NAME`, repeatable, shell patterns allowed."""
+    return click.option(
+        "--mission",
+        "-m",
+        "names",
+        multiple=True,
+        help=f"{verb} this mission, or those matching a pattern like 'tunnels-*' (repeat; "
+        f"default: {default}).",
+    )
+
+
 @click.command("plot")
-@click.option(
-    "--bbox",
-    nargs=6,
-    type=float,
-    metavar="XMIN YMIN ZMIN XMAX YMAX ZMAX",
-    help="Outline this box (and, without --mission, draw the missions it overlaps).",
-)
-@click.option(
-    "--mission",
-    "-m",
-    "names",
-    multiple=True,
-    help="Draw this mission, or those matching a pattern like 'tunnels-*' (repeat; "
-    "default: every mission held here).",
-)
+@_bbox_option("Outline this box (and, without --mission, draw the missions it overlaps).")
+@_missions_option("Draw", "every mission held here")
 @click.option(
     "--up",
     type=click.Choice(["auto", "x", "y", "z"]),
@@ -276,7 +282,62 @@ def plot(
     )
 
 
+@click.command("grid")
+@_output_option("The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm).")
+@_missions_option("Cast the scans of", "every mission held here with laser scans")
+@_bbox_option("The grid covers this box's x and y (default: every scan's rays).")
+@click.option(
+    "--resolution",
+    type=click.FloatRange(min=0, min_open=True),
+    default=0.05,
+    show_default=True,
+    help="The side of a cell, in metres.",
+)
+@frame_option("Cast the scans")
+@json_option
+@pass_session
+def grid(
+    session: Session,
+    output: Path,
+    names: tuple[str, ...],
+    bbox: tuple[float, ...] | None,
+    resolution: float,
+    frame: str,
+    as_json: bool,
+) -> None:
+    """Write an occupancy grid of laser missions for nav2's map_server: a PGM
+    (0 occupied, 254 free, 205 unknown) and its YAML.
+
+    Each ray of each scan runs from the pose that took it to its return: the
+    return's cell is hit, the cells before it passed; a cell hit in more than
+    65 % of the rays reaching it is occupied, in fewer than 25 % free. Several
+    missions share one grid in the world frame (`mapctl align`).
+    """
+    from mapctl import render
+
+    info = session.call(
+        "grid_map",
+        path=str(output.resolve()),
+        missions=list(names) or None,
+        bbox=list(bbox) if bbox else None,
+        resolution=resolution,
+        frame=frame,
+    )
+    if as_json:
+        render.emit_json(info)
+        return
+    cells = info["cells"]
+    render.line(
+        f"wrote {output} and {Path(info['image']).name}: {info['width']} x {info['height']} "
+        f"cells of {info['resolution']} m from {info['scans']} scans of "
+        f"{', '.join(info['missions'])} ({cells['occupied']} occupied, {cells['free']} free, "
+        f"{cells['unknown']} unknown) in {info['seconds']:.2f} s"
+    )
+    if info["without_scans"]:
+        render.line(f"no laser scans in: {', '.join(info['without_scans'])}", "yellow")
+
+
 def register(cli: click.Group) -> None:
     """Add this module's commands to `cli`."""
-    for command in (import_map, export_map, missions, plot):
+    for command in (import_map, export_map, missions, plot, grid):
         cli.add_command(command)

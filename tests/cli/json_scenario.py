@@ -23,6 +23,7 @@ from tests.multiproc.conftest import COMMAND_TIMEOUT, MAPCTL, Daemons
 
 ROOT = Path(__file__).resolve().parents[2]
 INTEL = ROOT / "sample_maps" / "pose_graphs" / "intel.g2o"
+LASER_LOG = ROOT / "sample_maps" / "laser_logs" / "intel-head.clf.bz2"
 STRUCT = "google.protobuf.Struct"
 COUNTER = "mapapi.v1.Counter"
 
@@ -113,6 +114,10 @@ def _maps(out: Outputs, repo: Path, root: Path) -> None:
     out.run(("plot",), "-o", str(root / "map.png"), repo=repo)
     out.run(("align",), repo=repo)  # one mission: the world is its frame
     out.run(("missions",), "--frame", "world", repo=repo)
+    laser = root / "laser"  # a repository of its own: the others' boxes stay as they are
+    out.run(("init",), str(laser), "--name", "robot-l")
+    out.run(("import",), str(LASER_LOG), repo=laser)
+    out.run(("grid",), "-o", str(root / "head.yaml"), "--resolution", "0.1", repo=laser)
 
 
 def run_secure(out: Outputs, root: Path) -> None:

@@ -258,6 +258,8 @@ class TestThroughTheDaemon:
         listed = await daemon.json("missions", "--swarm")
         exported = await daemon.json("export", "intel", "-o", "intel-out.g2o")
         drawn = await daemon.json("plot", "-o", "intel.png")
+        await daemon.json("import", str(LOG))
+        grid = await daemon.json("grid", "-o", "head.yaml", "-m", "intel-head")  # in a process
 
         record = daemon.record
         assert record is not None
@@ -268,6 +270,55 @@ class TestThroughTheDaemon:
         assert (tmp_path / "intel-out.g2o").read_text().startswith("VERTEX_SE2 0 ")
         assert drawn["path"] == str(tmp_path / "intel.png")
         assert (tmp_path / "intel.png").read_bytes().startswith(PNG)
+        assert (grid["path"], grid["scans"]) == (str(tmp_path / "head.yaml"), 671)
+        assert (tmp_path / "head.pgm").read_bytes().startswith(b"P5\n")
+
+
+class TestGrid:
+    def test_a_laser_log_becomes_a_nav2_map(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        mapctl("import", str(LOG))
+        target = tmp_path / "maps" / "head.yaml"
+        target.parent.mkdir()
+        box = ("--bbox", "-5", "-5", "0", "5", "4", "0", "--resolution", "0.1")
+
+        info = mapctl.json("grid", "-o", str(target), *box)
+
+        assert (info["width"], info["height"], info["origin"]) == (100, 90, [-5.0, -5.0, 0.0])
+        assert (info["missions"], info["scans"], info["frame"]) == (["intel-head"], 671, "mission")
+        assert info["image"] == str(target.with_suffix(".pgm"))
+        assert sum(info["cells"].values()) == 100 * 90
+        assert "image: head.pgm\nmode: trinary\nresolution: 0.1\n" in target.read_text()
+        pgm = target.with_suffix(".pgm").read_bytes()
+        assert pgm.startswith(b"P5\n")
+        assert len(pgm.split(b"\n", 4)[4]) == 100 * 90
+        said = mapctl("grid", "-o", str(tmp_path / "all.yaml"))
+        assert said.startswith(f"wrote {tmp_path / 'all.yaml'} and all.pgm: 657 x 505 cells")
+
+    def test_usage_errors(self, intel: Mapctl, tmp_path: Path) -> None:
+        target = str(tmp_path / "map.yaml")
+        before = {  # the Intel graph alone: no scans
+            "no mission with laser scans here; import a CARMEN log": (),
+            "no laser scans in 'intel'": ("-m", "intel"),
+        }
+        after = {
+            "no mission 'nope' here": ("-m", "nope"),
+            "grid of 65451 x 50300 cells at 0.0005 m is larger than 8192 x 8192": (
+                *("-m", "intel-head", "--resolution", "0.0005"),
+            ),
+            "mission 'intel-head' has no place in the world frame yet": (
+                *("-m", "intel-head", "--frame", "world"),
+            ),
+        }
+        for cases in (before, after):
+            if cases is after:
+                intel("import", str(LOG))
+            for message, args in cases.items():
+                outcome = intel.main("grid", "-o", target, *args)
+                assert outcome.code == EXIT_USAGE, args
+                assert message in outcome.err, outcome.err
+        pgm = intel.main("grid", "-o", str(tmp_path / "map.pgm"))
+        assert "name the .yaml file, not 'map.pgm'" in pgm.err
+        assert not (tmp_path / "map.yaml").exists()
 
 
 class TestMissionRules:

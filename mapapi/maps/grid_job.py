@@ -1,0 +1,129 @@
+"""`mapctl grid`'s job: read laser missions' scans as rays and cast them into a
+nav2 occupancy grid (`mapapi.maps.grid`), off the event loop (`jobs.run_job`).
+
+A laser mission (`mapapi.maps.laser`) stores each scan as a point block that
+names its vertex: the rays run from that vertex's position to each point.
+Both are in the mission's frame; in the world frame both are moved by the
+mission's place there (`frames.frame_at`), one rigid transform per mission,
+as `export --frame world` moves poses. A scan keeps no record of its beams
+that returned nothing, so no ray is cast for them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
+from mapapi.maps.alignment import pose_matrix
+from mapapi.maps.cloud import block_points
+from mapapi.maps.frames import MISSION, frame_at
+from mapapi.maps.grid import FREE, OCCUPIED, UNKNOWN, XY, OccupancyCounts, grid_spec, write_nav2
+from mapapi.maps.schema import CLOUDS, VERTICES
+from mapapi.maps.stored import mission_row, rows_of
+
+if TYPE_CHECKING:
+    from mapapi.service.peer import Peer
+
+
+@dataclass(frozen=True, slots=True)
+class Rays:
+    """A mission's scans as rays in one frame: ray i runs from `origins[i]` to
+    `ends[i]` (x, y in metres); `scans` counts the scans they came from."""
+
+    origins: XY
+    ends: XY
+    scans: int
+
+
+def rays_at(peer: Peer, time: int, mission: str, frame: str = MISSION) -> Rays:
+    """The rays of `mission`'s scans as of `time`, in `frame`.
+
+    Raises:
+        MapImportError: no such mission.
+        UsageError: in the world frame, the mission was never aligned.
+    """
+    mission_row(peer, time, mission)
+    where = {
+        v.index: (v.pose.x, v.pose.y, v.pose.z) for v in rows_of(peer, time, VERTICES, mission)
+    }
+    blocks = [b for b in rows_of(peer, time, CLOUDS, mission) if b.HasField("vertex")]
+    blocks = [b for b in blocks if b.vertex in where]  # a scan whose pose is not held here
+    if not blocks:
+        empty = np.zeros((0, 2))
+        return Rays(empty, empty, 0)
+    ends = np.concatenate([block_points(b) for b in blocks]).astype(np.float64)
+    counts = [b.count for b in blocks]
+    origins = np.repeat(np.array([where[b.vertex] for b in blocks]), counts, axis=0)
+    if frame != MISSION:
+        found = frame_at(peer, time, mission)
+        if found is None:
+            raise UsageError(
+                f"mission {mission!r} has no place in the world frame yet; run `mapctl align`, "
+                "or cast it in its own frame (--frame mission)"
+            )
+        move = pose_matrix(found.pose)
+        origins, ends = (p @ move[:3, :3].T + move[:3, 3] for p in (origins, ends))
+    return Rays(origins[:, :2], ends[:, :2], len(blocks))
+
+
+def grid_missions(
+    peer: Peer,
+    time: int,
+    missions: list[str],
+    target: Path,
+    box: BBox | None,
+    resolution: float,
+    frame: str = MISSION,
+) -> dict[str, object]:
+    """Cast the scans of `missions` as of `time` into a grid of `resolution`
+    over `box` (default: around every ray) in `frame`, and write it to the
+    nav2 YAML `target` and the PGM beside it; what was written.
+
+    Raises:
+        UsageError: none of the missions has a laser scan, the grid would be
+            too large (`grid.MAX_SIDE`), or in the world frame a mission was
+            never aligned.
+        MapImportError: no such mission.
+    """
+    found = {name: rays_at(peer, time, name, frame) for name in missions}
+    cast = [name for name, rays in found.items() if rays.scans]
+    if not cast:
+        raise UsageError(
+            f"no laser scans in {', '.join(map(repr, missions))}; a grid is cast from laser "
+            "scans: import a CARMEN log (.clf)"
+        )
+    origins = np.concatenate([found[n].origins for n in cast])
+    ends = np.concatenate([found[n].ends for n in cast])
+    if box is None:
+        both = np.concatenate([origins, ends])
+        margin = resolution  # so the outermost returns are cells inside the grid
+        xmin, ymin = both.min(axis=0) - margin
+        xmax, ymax = both.max(axis=0) + margin
+    else:
+        xmin, ymin, xmax, ymax = box.xmin, box.ymin, box.xmax, box.ymax
+    spec = grid_spec(float(xmin), float(ymin), float(xmax), float(ymax), resolution)
+    counts = OccupancyCounts(spec)
+    counts.add_rays(origins, ends)
+    pixels = counts.image()
+    image = write_nav2(pixels, spec, target)
+    return {
+        "image": str(image),
+        "width": spec.width,
+        "height": spec.height,
+        "resolution": spec.resolution,
+        "origin": [spec.x0, spec.y0, 0.0],
+        "missions": cast,
+        "without_scans": [name for name in missions if name not in cast],
+        "scans": sum(found[n].scans for n in cast),
+        "rays": len(ends),
+        "cells": {
+            "occupied": int(np.count_nonzero(pixels == OCCUPIED)),
+            "free": int(np.count_nonzero(pixels == FREE)),
+            "unknown": int(np.count_nonzero(pixels == UNKNOWN)),
+        },
+    }

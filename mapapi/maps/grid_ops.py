@@ -1,0 +1,106 @@
+"""`mapctl grid`: an occupancy grid of laser missions for nav2's `map_server`
+(issue 17 §4), as an operation of the peer (in its daemon when one runs).
+
+The casting (`mapapi.maps.grid_job.grid_missions`, numpy over every ray of
+every scan: seconds for a large log) runs off the event loop, in a process of
+its own while the peer serves a swarm (`jobs.run_job`), reading the missions
+as of one time (`stored.read_time`), as `export` and `plot` do.
+
+Not a mode of `export`: `export` writes one mission to a file, while a grid
+covers a box of the merged map, from any number of missions, chosen as `plot`
+chooses them; it writes two files and says different things about them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mapapi.core.errors import UsageError
+from mapapi.lookup.spatial import BBox
+from mapapi.service.ops import Operation
+
+if TYPE_CHECKING:
+    from mapapi.service.peer import Peer
+
+Json = Any
+
+DEFAULT_RESOLUTION = 0.05
+"""Metres per cell: nav2's usual 5 cm."""
+
+
+def grid_target(path: str) -> Path:
+    """The YAML file to write a grid to, absolute (the PGM goes beside it).
+
+    Raises:
+        UsageError: `path` does not end in .yaml or .yml.
+    """
+    target = Path(path).expanduser().absolute()
+    if target.suffix.lower() not in (".yaml", ".yml"):
+        raise UsageError(
+            f"a grid is written as nav2's YAML and a PGM beside it: name the .yaml file, "
+            f"not {target.name!r}"
+        )
+    return target
+
+
+class GridOperations:
+    """The `grid_map` operation over one peer."""
+
+    def __init__(self, peer: Peer) -> None:
+        self.peer = peer
+
+    def operations(self) -> Mapping[str, Operation]:
+        """See `mapapi.service.ops.OperationSet`."""
+        return {"grid_map": self.grid_map}
+
+    async def grid_map(
+        self,
+        path: str,
+        missions: list[str] | None = None,
+        bbox: list[float] | None = None,
+        resolution: float = DEFAULT_RESOLUTION,
+        frame: str = "mission",
+    ) -> Json:
+        """Cast the laser scans of the missions named or matching a pattern
+        (default: every mission held here with scans) into an occupancy grid
+        over `bbox`'s x and y (default: around every ray), `resolution` metres
+        a cell, in `frame` ("world" once aligned); write it as nav2's YAML
+        `path` and a PGM beside it.
+
+        Raises:
+            UsageError: a name matches no mission here, no mission has laser
+                scans, the grid would exceed `grid.MAX_SIDE` cells a side, or
+                in the world frame a mission was never aligned.
+        """
+        from mapapi.maps.frames import frame_reads
+        from mapapi.maps.grid_job import grid_missions
+        from mapapi.maps.jobs import run_job
+        from mapapi.maps.schema import CLOUDS
+        from mapapi.maps.stored import choose_missions, list_missions, read_time
+
+        target = grid_target(path)
+        box = None if bbox is None else BBox.from_tuple(bbox)
+        held = await list_missions(self.peer)
+        if missions:
+            chosen = [i.name for i in choose_missions(held, missions, None)]
+        else:
+            chosen = [i.name for i in held if i.vertices and i.points]  # laser missions
+            if not chosen:
+                raise UsageError(
+                    "no mission with laser scans here; import a CARMEN log (.clf) first"
+                )
+        started = time.perf_counter()
+        async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:
+            info = await run_job(
+                self.peer, grid_missions, at, chosen, target, box, resolution, frame
+            )
+        return {
+            "path": str(target),
+            **info,
+            "frame": frame,
+            "bbox": None if box is None else list(box.as_tuple()),
+            "seconds": round(time.perf_counter() - started, 3),
+        }
