@@ -92,9 +92,9 @@ class AlignOperations:
         from mapapi.maps.stored import GRAPH_READ, choose_missions, list_missions, read_time
 
         held = [i for i in await list_missions(self.peer) if i.kind == "graph"]
-        infos = {i.name: i for i in held}
         if not held:
             raise UsageError("no pose-graph mission here to align; import one first")
+        infos = {i.name: i for i in held}
         chosen = [i.name for i in choose_missions(held, missions, None)]
         if anchor is not None and anchor not in chosen:
             raise UsageError(f"the anchor {anchor!r} is not among the missions to align")
@@ -103,8 +103,8 @@ class AlignOperations:
         await ensure_tables(self.peer, {FRAMES: Frame})
         chunks, rows = await self._frame_chunks(view, list(result.frames))
         existing = await self._existing(view, list(result.frames))
-        for name in existing:
-            await self.views.pin(view, frame_item(name))
+        for item in [*rows, *(frame_item(name) for name in existing)]:
+            await self.views.pin(view, item)  # rows it updates, maybe unread by the view
 
         def write(tx: Transaction) -> None:
             for item, row in rows.items():
