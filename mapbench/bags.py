@@ -5,7 +5,8 @@ A bag holds a robot driving a helix: `nav_msgs/Odometry` on `/odom` (frame `odom
 child `base_link`), the same poses as one `nav_msgs/Path` on `/path` (frame
 `map`), `/tf_static` (map -> odom) and, every `cloud_every` poses, a ring of
 points around the robot as `sensor_msgs/PointCloud2` on `/points` (frame `odom`)
-and, if asked, an `nav_msgs/OccupancyGrid` on `/map`.
+and, if asked, a `nav_msgs/OccupancyGrid` on `/map`: twice, all unknown then
+a room of 300 x 200 cells of 5 cm (`room_cells`), as a mapper republishes its map.
 
     python -m mapbench.bags run1.bag --poses 200          # ROS 1
     python -m mapbench.bags run2 --storage mcap          # ROS 2, a folder
@@ -24,6 +25,10 @@ from mapapi.maps.bag_export import cloud_message, pose_message
 from mapapi.maps.se3 import Pose
 
 STORAGES = ("ros1", "sqlite3", "mcap")
+_T0 = 10**9 * 1_700_000_000  # the first message's time, ns
+GRID_RESOLUTION = 0.05
+GRID_ORIGIN: Pose = (-7.5, -5.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+"""The corner of `room_cells` in the bags' grid: the room spans x -7.5..7.5, y -5..5."""
 
 
 def helix_pose(i: int) -> Pose:
@@ -98,18 +103,37 @@ class Messages:
         )
         return t["tf2_msgs/msg/TFMessage"](transforms=[stamped])
 
-    def grid(self, ns: int) -> Any:
-        """A 4 x 4 free `nav_msgs/OccupancyGrid`."""
+    def grid(
+        self, ns: int, cells: np.ndarray, origin: Pose, resolution: float = GRID_RESOLUTION
+    ) -> Any:
+        """A `nav_msgs/OccupancyGrid` in map of int8 `cells` (height x width, row 0
+        the bottom), its corner at `origin`."""
         t = self.types
+        height, width = cells.shape
         info = t["nav_msgs/msg/MapMetaData"](
             map_load_time=self.header(ns, "").stamp,
-            resolution=0.05,
-            width=4,
-            height=4,
-            origin=self.pose((0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)),
+            resolution=resolution,
+            width=width,
+            height=height,
+            origin=self.pose(origin),
         )
-        cells = np.zeros(16, dtype=np.int8)
-        return t["nav_msgs/msg/OccupancyGrid"](header=self.header(ns, "map"), info=info, data=cells)
+        data = np.ascontiguousarray(cells, dtype=np.int8).ravel()
+        return t["nav_msgs/msg/OccupancyGrid"](header=self.header(ns, "map"), info=info, data=data)
+
+
+def room_cells(width: int = 300, height: int = 200) -> np.ndarray:
+    """A room as a grid's int8 cells (row 0 the bottom): free inside, walls of
+    100 around it and along a partition, an unknown corner (-1), a patch of 50
+    (neither free nor occupied) and cells of 20 and 70 (free and occupied)."""
+    cells = np.zeros((height, width), dtype=np.int8)
+    cells[[0, -1], :] = 100
+    cells[:, [0, -1]] = 100
+    cells[: height // 2, width // 3] = 100  # a partition from the bottom wall
+    cells[-40:, -60:] = -1  # the top-right corner never seen
+    cells[20:30, 20:30] = 50
+    cells[40:45, 40:45] = 20
+    cells[50:55, 50:55] = 70
+    return cells
 
 
 def ring(center: Pose, count: int) -> np.ndarray:
@@ -139,7 +163,7 @@ def write_bag(
         tf = "geometry_msgs/TransformStamped[] transforms"
         store.register(get_types_from_msg(tf, "tf2_msgs/msg/TFMessage"))
     build = Messages(store, ros1)
-    stamps = [10**9 * 1_700_000_000 + i * 10**8 for i in range(poses)]  # 10 Hz
+    stamps = [_T0 + i * 10**8 for i in range(poses)]  # 10 Hz
     track = [helix_pose(i) for i in range(poses)]
     with _writer(path, storage) as writer:
 
@@ -160,8 +184,13 @@ def write_bag(
                 put(cloud, ns, build.cloud(ns, ring(pose, cloud_points)))
         if poses:
             put(connect("/path", "nav_msgs/msg/Path"), stamps[-1], build.path(stamps, track))
-        if grid:
-            put(connect("/map", "nav_msgs/msg/OccupancyGrid"), stamps[0], build.grid(stamps[0]))
+        if grid:  # an unknown map first: the last message is the map
+            room = room_cells()
+            grid_topic = connect("/map", "nav_msgs/msg/OccupancyGrid")
+            unknown = np.full(room.shape, -1, np.int8)
+            first, last = (stamps[0], stamps[-1]) if stamps else (_T0, _T0 + 1)
+            put(grid_topic, first, build.grid(first, unknown, GRID_ORIGIN))
+            put(grid_topic, last, build.grid(last, room, GRID_ORIGIN))
     return path
 
 

@@ -9,8 +9,9 @@ The built-in extents:
   ``mapctl set`` can be placed in space;
 - ``mapapi.v1.Mission`` (its ``bbox``, labelled with its name),
   ``mapapi.v1.Vertex`` (its position), ``mapapi.v1.Landmark`` (its position)
-  ``mapapi.v1.PointCloudBlock`` (its ``bbox``) and ``mapapi.v1.Frame`` (its
-  ``bbox``, the mission's in the world frame), each labelled with the name of
+  ``mapapi.v1.PointCloudBlock`` (its ``bbox``), ``mapapi.v1.Frame`` (its
+  ``bbox``, the mission's in the world frame) and ``mapapi.v1.GridTile`` (its
+  ``bbox``: an occupancy grid's tile), each labelled with the name of
   the mission it belongs to.
 
 Other types can be added with `register_extent`.
@@ -81,6 +82,8 @@ _EXTENTS: dict[str, Extent] = {
     "mapapi.v1.PointCloudBlock": Extent(_optional_box3, label=_mission_of),
     # A mission's place in the world frame lies at its box there (`mapctl align`).
     "mapapi.v1.Frame": Extent(_optional_box3, label=_mission_of),
+    # An occupancy grid's tiles lie at their boxes, so a box query finds the grid.
+    "mapapi.v1.GridTile": Extent(_optional_box3, label=_mission_of),
 }
 
 

@@ -1,5 +1,5 @@
-"""ROS messages as map values: the poses, times and points of the messages a bag
-holds, and the point cloud message a bag export writes.
+"""ROS messages as map values: the poses, times, points and occupancy grids of
+the messages a bag holds, and the point cloud message a bag export writes.
 
 The messages are the objects `rosbags` deserialises (ROS 1 and ROS 2 alike: its
 type names are `pkg/msg/Type` for both); they are read by attribute, so this
@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from mapapi.maps.cloud import Points
 from mapapi.maps.se3 import Pose
@@ -117,3 +118,38 @@ def cloud_points(message: Any) -> tuple[Points, int]:
 def tf_parents(message: Any) -> dict[str, str]:
     """child frame -> parent frame, for each transform of a TF message."""
     return {frame_name(t.child_frame_id): frame_name(t.header.frame_id) for t in message.transforms}
+
+
+GridCells = tuple[float, float, float, float, npt.NDArray[np.int8]]
+"""(resolution, origin x, y, z, cells (height, width), row 0 the bottom)."""
+
+
+def grid_cells(message: Any) -> GridCells:
+    """A `nav_msgs/OccupancyGrid`'s resolution, origin and int8 cells.
+
+    Only a grid whose origin is not rotated about z is read: its cells are then
+    axis-aligned in its frame, as tiles (`mapapi.maps.occupancy`) and nav2's
+    YAML (whose yaw map_server ignores) have them.
+
+    Raises:
+        ValueError: a rotated origin, a resolution that is not positive, or fewer
+            or more cells than width x height.
+    """
+    info = message.info
+    x, y, z, qx, qy, qz, qw = pose_of(info.origin)
+    yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    if abs(yaw) > 1e-9 or abs(qx) > 1e-9 or abs(qy) > 1e-9:
+        raise ValueError(
+            f"the grid's origin is rotated (yaw {math.degrees(yaw):.3f} degrees); only grids "
+            "with an unrotated origin are imported"
+        )
+    if not info.resolution > 0:
+        raise ValueError(f"the grid's resolution is {info.resolution}, not positive")
+    width, height = int(info.width), int(info.height)
+    data = np.asarray(message.data).astype(np.int8, copy=False)
+    if len(data) != width * height:
+        raise ValueError(f"OccupancyGrid of {width} x {height} cells holds {len(data)}")
+    # ROS states the resolution as a float32: 0.05 arrives as 0.0500000007; its
+    # shortest float32 decimal gives back the 0.05 the map was made with
+    resolution = float(str(np.float32(info.resolution)))
+    return resolution, x, y, z, data.reshape(height, width)

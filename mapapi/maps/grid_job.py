@@ -7,6 +7,10 @@ Both are in the mission's frame; in the world frame both are moved by the
 mission's place there (`frames.frame_at`), one rigid transform per mission,
 as `export --frame world` moves poses. A scan keeps no record of its beams
 that returned nothing, so no ray is cast for them.
+
+Grid missions (a bag's `nav_msgs/OccupancyGrid`, `mapapi.maps.occupancy`) are
+cast already: `write_stored_grids` composes their tiles at their own resolution
+and writes their occupancy as nav2's pixels, without resampling.
 """
 
 from __future__ import annotations
@@ -16,14 +20,25 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from mapapi.core.errors import UsageError
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.alignment import pose_matrix
 from mapapi.maps.cloud import block_points
 from mapapi.maps.frames import MISSION, frame_at
-from mapapi.maps.grid import FREE, OCCUPIED, UNKNOWN, XY, OccupancyCounts, grid_spec, write_nav2
-from mapapi.maps.schema import CLOUDS, VERTICES
+from mapapi.maps.grid import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    XY,
+    GridSpec,
+    OccupancyCounts,
+    grid_spec,
+    write_nav2,
+)
+from mapapi.maps.occupancy import compose_tiles, nav2_pixels, tiles_box
+from mapapi.maps.schema import CLOUDS, GRIDS, VERTICES
 from mapapi.maps.stored import mission_row, rows_of
 
 if TYPE_CHECKING:
@@ -110,6 +125,67 @@ def grid_missions(
     counts = OccupancyCounts(spec)
     counts.add_rays(origins, ends)
     pixels = counts.image()
+    info = _written(pixels, spec, target)
+    info.update(
+        missions=cast,
+        without_scans=[name for name in missions if name not in cast],
+        scans=sum(found[n].scans for n in cast),
+        rays=len(ends),
+    )
+    return info
+
+
+def write_stored_grids(
+    peer: Peer,
+    time: int,
+    missions: list[str],
+    target: Path,
+    box: BBox | None,
+    resolution: float | None,
+) -> dict[str, object]:
+    """Write the stored occupancy grids of `missions` as of `time`, composed over
+    `box` (default: around their tiles) at their resolution, as the nav2 YAML
+    `target` and the PGM beside it; what was written (as `grid_missions` says it).
+
+    Raises:
+        UsageError: a mission holds no grid tiles here, the grids' resolutions
+            differ, `resolution` is not theirs (stored grids are not
+            resampled), or the grid would be too large (`grid.MAX_SIDE`).
+        MapImportError: no such mission.
+    """
+    tiles = []
+    for name in missions:
+        mission_row(peer, time, name)
+        found = rows_of(peer, time, GRIDS, name)
+        if not found:
+            raise UsageError(
+                f"no grid tiles of {name!r} here; `mapctl query-bbox --load` fetches them"
+            )
+        tiles.extend(found)
+    stored = sorted({t.resolution for t in tiles})
+    side = stored[0]
+    if len(stored) > 1 or (resolution is not None and abs(resolution - side) > 1e-9 * side):
+        raise UsageError(
+            f"{', '.join(map(repr, missions))} store(s) grids of {', '.join(map(str, stored))} m "
+            f"a cell{'' if resolution is None else f', not {resolution} m'}; stored grids are "
+            "written at their own resolution: choose grids of one resolution, without "
+            "--resolution"
+        )
+    if box is None:
+        area = tiles_box(tiles)
+        # whole cells: half a cell less keeps float rounding from adding a column
+        # (grid_spec rounds the count up)
+        xmax, ymax = area.xmax - side / 2, area.ymax - side / 2
+    else:
+        area, xmax, ymax = box, box.xmax, box.ymax
+    spec = grid_spec(area.xmin, area.ymin, xmax, ymax, side)
+    info = _written(nav2_pixels(compose_tiles(tiles, spec)), spec, target)
+    info.update(missions=missions, without_scans=[], scans=0, rays=0)
+    return info
+
+
+def _written(pixels: npt.NDArray[np.uint8], spec: GridSpec, target: Path) -> dict[str, object]:
+    """Write `pixels` as nav2's map at `target`; what a grid's JSON says of it."""
     image = write_nav2(pixels, spec, target)
     return {
         "image": str(image),
@@ -117,10 +193,6 @@ def grid_missions(
         "height": spec.height,
         "resolution": spec.resolution,
         "origin": [spec.x0, spec.y0, 0.0],
-        "missions": cast,
-        "without_scans": [name for name in missions if name not in cast],
-        "scans": sum(found[n].scans for n in cast),
-        "rays": len(ends),
         "cells": {
             "occupied": int(np.count_nonzero(pixels == OCCUPIED)),
             "free": int(np.count_nonzero(pixels == FREE)),

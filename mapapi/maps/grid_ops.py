@@ -61,42 +61,55 @@ class GridOperations:
         path: str,
         missions: list[str] | None = None,
         bbox: list[float] | None = None,
-        resolution: float = DEFAULT_RESOLUTION,
+        resolution: float | None = None,
         frame: str = "mission",
     ) -> Json:
         """Cast the laser scans of the missions named or matching a pattern
-        (default: every mission held here with scans) into an occupancy grid
-        over `bbox`'s x and y (default: around every ray), `resolution` metres
-        a cell, in `frame` ("world" once aligned); write it as nav2's YAML
-        `path` and a PGM beside it.
+        (default: every mission held here with scans, else every grid mission)
+        into an occupancy grid over `bbox`'s x and y (default: around every
+        ray), `resolution` metres a cell (default `DEFAULT_RESOLUTION`), in
+        `frame` ("world" once aligned); write it as nav2's YAML `path` and a
+        PGM beside it. Grid missions (a bag's occupancy grid) are written as
+        stored, composed over `bbox`, at their own resolution.
 
         Raises:
             UsageError: a name matches no mission here, no mission has laser
-                scans, the grid would exceed `grid.MAX_SIDE` cells a side, or
-                in the world frame a mission was never aligned.
+                scans or a grid, laser and grid missions are mixed, the grid
+                would exceed `grid.MAX_SIDE` cells a side, in the world frame a
+                mission was never aligned, or a stored grid is asked for in the
+                world frame or at another resolution.
         """
         from mapapi.maps.frames import frame_reads
-        from mapapi.maps.grid_job import grid_missions
+        from mapapi.maps.grid_job import grid_missions, write_stored_grids
         from mapapi.maps.jobs import run_job
-        from mapapi.maps.schema import CLOUDS
-        from mapapi.maps.stored import choose_missions, list_missions, read_time
+        from mapapi.maps.schema import CLOUDS, GRIDS, MISSIONS
+        from mapapi.maps.stored import read_time
 
         target = grid_target(path)
         box = None if bbox is None else BBox.from_tuple(bbox)
-        held = await list_missions(self.peer)
-        if missions:
-            chosen = [i.name for i in choose_missions(held, missions, None)]
-        else:
-            chosen = [i.name for i in held if i.vertices and i.points]  # laser missions
-            if not chosen:
-                raise UsageError(
-                    "no mission with laser scans here; import a CARMEN log (.clf) first"
-                )
+        chosen, gridded = await self._chosen(missions)
         started = time.perf_counter()
-        async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:
-            info = await run_job(
-                self.peer, grid_missions, at, chosen, target, box, resolution, frame
-            )
+        if gridded:
+            if frame != "mission":
+                raise UsageError(
+                    "stored occupancy grids are written in their own frame only; drop --frame world"
+                )
+            async with read_time(self.peer, chosen, (MISSIONS, GRIDS)) as at:
+                info = await run_job(
+                    self.peer, write_stored_grids, at, chosen, target, box, resolution
+                )
+        else:
+            async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:
+                info = await run_job(
+                    self.peer,
+                    grid_missions,
+                    at,
+                    chosen,
+                    target,
+                    box,
+                    resolution or DEFAULT_RESOLUTION,
+                    frame,
+                )
         return {
             "path": str(target),
             **info,
@@ -104,3 +117,37 @@ class GridOperations:
             "bbox": None if box is None else list(box.as_tuple()),
             "seconds": round(time.perf_counter() - started, 3),
         }
+
+    async def _chosen(self, missions: list[str] | None) -> tuple[list[str], bool]:
+        """The missions to grid, and whether they are grid missions (whose stored
+        cells are written) rather than laser missions (whose scans are cast).
+
+        Raises:
+            UsageError: a name matches no mission here, none has scans or a
+                grid, or the names mix grid missions with others.
+        """
+        from mapapi.maps.schema import GRIDS
+        from mapapi.maps.stored import choose_missions, list_missions
+
+        held = await list_missions(self.peer)
+        if missions:
+            infos = choose_missions(held, missions, None)
+            gridded = [i.name for i in infos if GRIDS in i.chunks]
+            if gridded and len(gridded) < len(infos):
+                others = [i.name for i in infos if GRIDS not in i.chunks]
+                raise UsageError(
+                    f"{', '.join(gridded)} hold(s) an occupancy grid and {', '.join(others)} "
+                    "not: a grid is written from stored grids or cast from laser scans, "
+                    "not both; choose one kind with -m"
+                )
+            return [i.name for i in infos], bool(gridded)
+        lasers = [i.name for i in held if i.vertices and i.points]  # laser missions
+        if lasers:
+            return lasers, False
+        grids = [i.name for i in held if GRIDS in i.chunks]
+        if not grids:
+            raise UsageError(
+                "no mission with laser scans or an occupancy grid here; import a CARMEN log "
+                "(.clf) or a ROS bag with a nav_msgs/OccupancyGrid first"
+            )
+        return grids, True

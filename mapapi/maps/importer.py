@@ -7,8 +7,9 @@ mission row lists them. Its landmarks, if any, get one chunk (not tiled: a
 landmark map is small next to its poses), which the mission row names; a
 landmark observation is an edge of its pose's tile. A point cloud gets one
 chunk for its mission row and one of point-cloud blocks; a laser mission
-(`mapapi.maps.laser`), a graph's chunks and one of its scans' blocks.
-Everything is built
+(`mapapi.maps.laser`), a graph's chunks and one of its scans' blocks. An
+occupancy grid (`mapapi.maps.occupancy`) gets its mission row's chunk and one
+of its tiles, which the mission row names. Everything is built
 and checked first; chunks are created and rows staged only then, and committed
 once, so a failing import leaves no rows and no chunks. `import_missions`
 checks every name of a set before the first commit, so a clash stops the set
@@ -30,6 +31,7 @@ from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
 from mapapi.maps.laser import LaserMission, scan_blocks
+from mapapi.maps.occupancy import OccupancyGrid, grid_tiles
 from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, landmark_rows, vertex_rows
 from mapapi.maps.schema import (
     CLOUD_TABLES,
@@ -37,6 +39,8 @@ from mapapi.maps.schema import (
     EDGES,
     FRAMES,
     GRAPH_TABLES,
+    GRID_TABLES,
+    GRIDS,
     LANDMARKS,
     LASER_TABLES,
     MISSIONS,
@@ -57,7 +61,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]  # (rows staged, rows in all)
-MapSource = MissionGraph | PointCloud
+MapSource = MissionGraph | PointCloud | OccupancyGrid
 _PROGRESS_EVERY = 10_000
 
 
@@ -163,6 +167,12 @@ def _prepare(source: MapSource) -> _Prepared:
         summary = f"{len(source.points)} points in {len(rows[CLOUDS])} blocks"
         blocks = [_Part(CLOUDS, len(rows[CLOUDS]), lambda: rows[CLOUDS])]
         return _Prepared(source, rows[MISSIONS][0], blocks, CLOUD_TABLES, summary)
+    if isinstance(source, OccupancyGrid):
+        cut = grid_tiles(source)
+        height, width = source.cells.shape
+        summary = f"{width} x {height} cells of {source.resolution} m in {len(cut)} tiles"
+        part = _Part(GRIDS, len(cut), lambda: list(cut))
+        return _Prepared(source, mission_to_pb(source), [part], GRID_TABLES, summary)
     check_graph(source)
     tiles = tile_graph(source)
     summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"
@@ -193,8 +203,9 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
     source = prepared.source
     written = await _commit_rows(peer, prepared, progress)
     log.info("imported mission %s (%s)", source.name, prepared.summary)
-    if isinstance(source, PointCloud):
-        vertices, edges, points, landmarks = 0, 0, len(source.points), 0
+    if isinstance(source, PointCloud | OccupancyGrid):
+        vertices, edges, landmarks = 0, 0, 0
+        points = len(source.points) if isinstance(source, PointCloud) else 0
     else:
         vertices, edges = len(source.vertices), len(source.edges)
         points = source.point_count() if isinstance(source, LaserMission) else 0

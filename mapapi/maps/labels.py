@@ -5,7 +5,8 @@ the mission's name, so the store indexes a mission's rows and keeps its summary.
 - vertices and landmarks with their mission, placed at their position;
 - edges with their mission (they have no place);
 - point-cloud blocks with their mission, weighing their points, placed at their box;
-- frames (`mapctl align`) with their mission, placed at its box in the world frame.
+- frames (`mapctl align`) with their mission, placed at its box in the world frame;
+- occupancy grid tiles with their mission, weighing their cells, placed at their box.
 
 `mapapi.app` gives these to the store of every peer it builds on a repository,
 as it gives the mission rules; reads of a mission ask for them (`MAP_LABELS`)
@@ -20,7 +21,7 @@ from typing import Any
 
 from google.protobuf.message import DecodeError
 
-from mapapi.maps.schema import Edge, Frame, Landmark, Mission, PointCloudBlock, Vertex
+from mapapi.maps.schema import Edge, Frame, GridTile, Landmark, Mission, PointCloudBlock, Vertex
 from mapapi.store.labels import Box, LabelFn, Labels, RowLabel
 
 VERSION = "3"
@@ -60,6 +61,10 @@ def _frame(m: Any) -> RowLabel:
     return RowLabel(m.mission, 1, _box3(m.bbox) if m.HasField("bbox") else None)
 
 
+def _grid_tile(m: Any) -> RowLabel:
+    return RowLabel(m.mission, m.width * m.height, _box3(m.bbox) if m.HasField("bbox") else None)
+
+
 def map_labels() -> Labels:
     """The labels of the map tables' rows, by their protobuf type."""
     by_type = {
@@ -75,6 +80,7 @@ def map_labels() -> Labels:
         # a place has the mission's box in the world frame: the spatial index
         # places its frames chunk there, for queries in the world frame
         Frame.DESCRIPTOR.full_name: _reader(Frame, _frame),
+        GridTile.DESCRIPTOR.full_name: _reader(GridTile, _grid_tile),
     }
     return Labels(by_type, VERSION)
 

@@ -17,8 +17,11 @@ What becomes what (`read_bag`):
 - `/tf` and `/tf_static` name frames: a mission's frame is `<mission>/<frame_id>`
   of its messages' header, or, when that is empty, the TF parent of an odometry's
   `child_frame_id`. The TF tree itself is not stored;
-- `nav_msgs/OccupancyGrid` is not imported yet: a grid topic is skipped (logged),
-  and asking for one with `topics` is refused. Other types are skipped.
+- each `nav_msgs/OccupancyGrid` topic is one grid mission (`mapapi.maps.occupancy`)
+  of its **last** message (a map is republished whole as it grows), in its
+  header's frame. Only a grid whose origin is not rotated is read: a rotated one
+  is refused, naming the topic (rotating its cells would resample them).
+  Other types are skipped.
 
 Messages are read one at a time (a bag never sits in memory); errors name the
 topic and the message's index on it. `rosbags` is imported when a bag is read,
@@ -41,12 +44,13 @@ from mapapi.maps import bag_messages as msgs
 from mapapi.maps.cloud import PointCloud, Points
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph
+from mapapi.maps.occupancy import OccupancyGrid
 from mapapi.maps.se3 import Pose, compose, inverse, isotropic_information
 
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int, int], None]  # (messages read, messages in all)
-MapSource = MissionGraph | PointCloud
+MapSource = MissionGraph | PointCloud | OccupancyGrid
 
 FORMAT = "rosbag"
 INFORMATION = isotropic_information(400.0, 1641.5)
@@ -120,10 +124,13 @@ class _Bag:
     trajectories: dict[str, _Trajectory] = field(default_factory=dict)
     clouds: dict[str, _Cloud] = field(default_factory=dict)
     parents: dict[str, str] = field(default_factory=dict)
+    grids: dict[str, OccupancyGrid] = field(default_factory=dict)
 
     def read(self, topic: str, msgtype: str, message: Any, received: float) -> None:
         if msgtype in msgs.TF_TYPES:
             self.parents.update(msgs.tf_parents(message))
+        elif msgtype == msgs.OCCUPANCY_GRID:
+            self.read_grid(topic, message, received)
         elif msgtype == msgs.POINT_CLOUD:
             cloud = self.clouds.setdefault(topic, _Cloud(mission_name(self.prefix, topic)))
             points, dropped = msgs.cloud_points(message)
@@ -141,6 +148,15 @@ class _Bag:
                 track.child = track.child or msgs.frame_name(message.child_frame_id)
             for stamp, pose, frame in msgs.stamped_poses(msgtype, message, received):
                 track.add(stamp, pose, frame)
+
+    def read_grid(self, topic: str, message: Any, received: float) -> None:
+        """Keep a grid message as its topic's grid: each replaces the last."""
+        resolution, x, y, z, cells = msgs.grid_cells(message)
+        name = mission_name(self.prefix, topic)
+        frame = f"{name}/{msgs.frame_name(message.header.frame_id) or 'map'}"
+        stamp = msgs.stamp_seconds(message.header.stamp) or received
+        grid = OccupancyGrid(name, self.robot, frame, resolution, x, y, z, cells, stamp)
+        self.grids[topic] = grid
 
     def missions(self, voxel: float) -> list[MapSource]:
         """The missions read, trajectories first, each in its frame."""
@@ -163,6 +179,11 @@ class _Bag:
                 continue
             frame = f"{cloud.name}/{cloud.frame or 'map'}"
             found.append(PointCloud(cloud.name, self.robot, frame, points, cloud.dropped))
+        for topic, grid in self.grids.items():
+            if not grid.cells.size:
+                log.warning("topic %s holds an empty grid: no mission", topic)
+                continue
+            found.append(grid)
         return found
 
 
@@ -175,8 +196,8 @@ def read_bag(
     voxel: float = 0.0,
     progress: Progress | None = None,
 ) -> list[MapSource]:
-    """Read a ROS bag's pose and point cloud topics as missions (see the module
-    docstring).
+    """Read a ROS bag's pose, point cloud and occupancy grid topics as missions
+    (see the module docstring).
 
     Args:
         topics: the topics to read (default: every supported one).
@@ -188,7 +209,7 @@ def read_bag(
     Raises:
         MapImportError: not a bag rosbags reads, a message that does not decode or
             is not a valid map value (naming the topic and the message's index on
-            it), or no supported topic with data.
+            it: a rotated grid origin among them), or no supported topic with data.
         UsageError: rosbags is missing, or `topics` names a topic the bag lacks or
             one of a type not imported.
     """
@@ -218,7 +239,8 @@ def read_bag(
     found = bag.missions(voxel)
     if not found:
         raise MapImportError(
-            "no pose or point cloud topic with data: nothing to import", source=str(path)
+            "no pose, point cloud or occupancy grid topic with data: nothing to import",
+            source=str(path),
         )
     return found
 
@@ -258,7 +280,7 @@ def _choose(connections: Iterable[Any], topics: Sequence[str], source: str) -> l
     Raises:
         UsageError: a topic the bag lacks, or of a type not imported.
     """
-    supported = (*msgs.POSE_TYPES, msgs.POINT_CLOUD)
+    supported = (*msgs.POSE_TYPES, msgs.POINT_CLOUD, msgs.OCCUPANCY_GRID)
     everything = list(connections)
     by_topic = {c.topic: c.msgtype for c in everything}
     for topic in topics:
@@ -267,8 +289,6 @@ def _choose(connections: Iterable[Any], topics: Sequence[str], source: str) -> l
             raise UsageError(
                 f"{source} has no topic {topic!r}; it has {', '.join(sorted(by_topic)) or 'none'}"
             )
-        if msgtype == msgs.OCCUPANCY_GRID:
-            raise UsageError(f"topic {topic}: occupancy grids ({msgtype}) are not imported yet")
         if msgtype not in supported:
             raise UsageError(
                 f"topic {topic} is of type {msgtype}, which is not imported; "
@@ -277,12 +297,6 @@ def _choose(connections: Iterable[Any], topics: Sequence[str], source: str) -> l
     chosen = []
     for connection in everything:
         wanted = connection.topic in topics if topics else connection.msgtype in supported
-        if connection.msgtype == msgs.OCCUPANCY_GRID and not topics:
-            log.warning(
-                "topic %s skipped: occupancy grids (%s) are not imported yet",
-                connection.topic,
-                connection.msgtype,
-            )
         if wanted or connection.msgtype in msgs.TF_TYPES:
             chosen.append(connection)
     return chosen

@@ -17,13 +17,14 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.graph import NO_ORIGIN, EdgeKind, GraphEdge, Origin, Point
 from mapapi.maps.se3 import Pose
 
-MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS, FRAMES = (
+MISSIONS, VERTICES, EDGES, LANDMARKS, CLOUDS, FRAMES, GRIDS = (
     "missions",
     "vertices",
     "edges",
     "landmarks",
     "pointclouds",
     "frames",
+    "grids",
 )
 
 Mission = maps_pb2.Mission
@@ -36,6 +37,7 @@ Box3 = maps_pb2.Box3
 Pose3 = maps_pb2.Pose3
 OriginPb = maps_pb2.Origin
 Frame = maps_pb2.Frame
+GridTile = maps_pb2.GridTile
 
 # table name -> payload class, for the tables a graph (or a cloud) import writes; a
 # graph's import makes its (empty) frames chunk, where `mapctl align` writes
@@ -46,6 +48,7 @@ GRAPH_TABLES: dict[str, type[Message]] = {
     FRAMES: Frame,
 }
 CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
+GRID_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, GRIDS: GridTile}
 LASER_TABLES: dict[str, type[Message]] = {**GRAPH_TABLES, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {
     **GRAPH_TABLES,

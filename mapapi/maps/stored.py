@@ -32,6 +32,7 @@ from mapapi.maps.schema import (
     CLOUDS,
     EDGES,
     FRAMES,
+    GRIDS,
     LANDMARKS,
     MISSIONS,
     VERTICES,
@@ -78,8 +79,11 @@ class MissionInfo:
 
     @property
     def kind(self) -> str:
-        """What the mission holds: "cloud" when it has points and no poses, else
-        "graph" (a laser mission has both: its trajectory is its graph)."""
+        """What the mission holds: "grid" for an occupancy grid's tiles, "cloud"
+        when it has points and no poses, else "graph" (a laser mission has both:
+        its trajectory is its graph)."""
+        if GRIDS in self.chunks:
+            return "grid"
         return "cloud" if self.points and not self.vertices else "graph"
 
 

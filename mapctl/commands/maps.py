@@ -20,6 +20,8 @@ def _bbox_text(box: list[float] | None) -> str:
 def _size_text(mission: dict[str, Any]) -> str:
     if mission["vertices"] is None:
         return "?"  # held elsewhere: only its box is known here
+    if "grids" in (mission.get("chunks") or {}):
+        return "occupancy grid"  # its cells are counted by `mapctl grid`
     graph = f"{mission['vertices']} v + {mission['edges']} e"
     if mission.get("landmarks"):
         graph += f" + {mission['landmarks']} lm"
@@ -289,9 +291,8 @@ def plot(
 @click.option(
     "--resolution",
     type=click.FloatRange(min=0, min_open=True),
-    default=0.05,
-    show_default=True,
-    help="The side of a cell, in metres.",
+    default=None,
+    help="The side of a cell, in metres (scans: 0.05 by default; a stored grid keeps its own).",
 )
 @frame_option("Cast the scans")
 @json_option
@@ -301,17 +302,20 @@ def grid(
     output: Path,
     names: tuple[str, ...],
     bbox: tuple[float, ...] | None,
-    resolution: float,
+    resolution: float | None,
     frame: str,
     as_json: bool,
 ) -> None:
-    """Write an occupancy grid of laser missions for nav2's map_server: a PGM
-    (0 occupied, 254 free, 205 unknown) and its YAML.
+    """Write an occupancy grid of laser missions, or the stored grids of grid
+    missions, for nav2's map_server: a PGM (0 occupied, 254 free, 205 unknown)
+    and its YAML.
 
     Each ray of each scan runs from the pose that took it to its return: the
     return's cell is hit, the cells before it passed; a cell hit in more than
     65 % of the rays reaching it is occupied, in fewer than 25 % free. Several
-    missions share one grid in the world frame (`mapctl align`).
+    missions share one grid in the world frame (`mapctl align`). A stored
+    grid's cells (a bag's occupancy grid) are written as they are: at least
+    65 occupied, below 25 free.
     """
     from mapctl import render
 
@@ -327,9 +331,10 @@ def grid(
         render.emit_json(info)
         return
     cells = info["cells"]
+    source = f"{info['scans']} scans of" if info["scans"] else "the stored grid of"
     render.line(
         f"wrote {output} and {Path(info['image']).name}: {info['width']} x {info['height']} "
-        f"cells of {info['resolution']} m from {info['scans']} scans of "
+        f"cells of {info['resolution']} m from {source} "
         f"{', '.join(info['missions'])} ({cells['occupied']} occupied, {cells['free']} free, "
         f"{cells['unknown']} unknown) in {info['seconds']:.2f} s"
     )

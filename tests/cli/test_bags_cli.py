@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mapbench.bags import STORAGES, write_bag
+from mapbench.bags import GRID_ORIGIN, STORAGES, room_cells, write_bag
 from tests.cli.conftest import Mapctl
 
 pytest.importorskip("rosbags")
@@ -82,11 +82,61 @@ class TestImport:
         outcome = mapctl.main("import", str(junk))
         assert outcome.code == EXIT_USAGE
         assert outcome.err_lines[0].startswith(f"error: {junk}: not a ROS bag rosbags can read")
-        grid = write_bag(tmp_path / "grid", "mcap", poses=3, grid=True)
-        asked = mapctl.main("import", str(grid), "--topics", "/map")
+        asked = mapctl.main("import", str(tmp_path / "junk.bag"), "--topics", "/map")
         assert asked.code == EXIT_USAGE
-        assert "occupancy grids (nav_msgs/msg/OccupancyGrid) are not imported yet" in asked.err
         assert mapctl.json("log") == []
+
+
+def read_pgm(path: Path) -> np.ndarray:
+    """A binary PGM's pixels (rows x columns), row 0 the top."""
+    data = path.read_bytes()
+    magic, _comment, size, _depth, pixels = data.split(b"\n", 4)
+    assert magic == b"P5"
+    width, height = map(int, size.split())
+    return np.frombuffer(pixels, dtype=np.uint8).reshape(height, width)
+
+
+class TestGrid:
+    def test_a_bag_grid_round_trips_to_nav2(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        bag = write_bag(tmp_path / "run", "mcap", poses=3, grid=True)
+        imported = mapctl.json("import", str(bag), "--topics", "/map")
+        (mission,) = imported["missions"]
+        assert (mission["name"], mission["bbox"]) == ("run-map", [-7.5, -5.0, 0.0, 7.5, 5.0, 0.0])
+        assert "grids" in mission["chunks"]
+        assert [m["kind"] for m in mapctl.json("missions")["missions"]] == ["grid"]
+        info = mapctl.json("grid", "-o", str(tmp_path / "map.yaml"))
+        assert (info["missions"], info["scans"], info["without_scans"]) == (["run-map"], 0, [])
+        cells = room_cells()
+        want = np.full(cells.shape, 205, np.uint8)
+        want[cells >= 65] = 0
+        want[(cells >= 0) & (cells < 25)] = 254
+        pixels = read_pgm(tmp_path / "map.pgm")
+        assert np.array_equal(pixels, want[::-1])  # the PGM's first row is the top
+        yaml = (tmp_path / "map.yaml").read_text()
+        assert "resolution: 0.05\n" in yaml
+        assert f"origin: [{GRID_ORIGIN[0]!r}, {GRID_ORIGIN[1]!r}, 0.0]" in yaml
+        assert info["cells"]["unknown"] == int(np.count_nonzero(want == 205))
+
+    def test_a_box_crops_and_refusals(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        bag = write_bag(tmp_path / "run.bag", "ros1", poses=3, grid=True)
+        imported = mapctl.json("import", str(bag))
+        tiles = {m["name"]: m["chunks"].get("grids") for m in imported["missions"]}["run-map"]
+        found = mapctl.json("query-bbox", "-t", "grids", "1", "1", "0", "2", "2", "0")["results"]
+        assert [(r["chunk"], r["missions"]) for r in found] == [(tiles, ["run-map"])]
+        box = ("--bbox", "-7.5", "-5", "0", "-2.5", "0", "0")  # the room's lower-left 100 x 100
+        info = mapctl.json("grid", "-o", str(tmp_path / "box.yaml"), "-m", "run-map", *box)
+        assert (info["width"], info["height"], info["origin"]) == (100, 100, [-7.5, -5.0, 0.0])
+        assert read_pgm(tmp_path / "box.pgm")[-1, 0] == 0  # the corner wall
+        out = str(tmp_path / "x.yaml")
+        finer = mapctl.main("grid", "-o", out, "-m", "run-map", "--resolution", "0.1")
+        assert finer.code == EXIT_USAGE
+        assert "grids of 0.05 m a cell, not 0.1 m" in finer.err
+        mixed = mapctl.main("grid", "-o", out, "-m", "run-*")
+        assert mixed.code == EXIT_USAGE
+        assert "not both; choose one kind with -m" in mixed.err
+        world = mapctl.main("grid", "-o", out, "-m", "run-map", "--frame", "world")
+        assert world.code == EXIT_USAGE
+        assert "in their own frame only" in world.err
 
 
 class TestExport:

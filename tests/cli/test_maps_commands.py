@@ -297,7 +297,7 @@ class TestGrid:
     def test_usage_errors(self, intel: Mapctl, tmp_path: Path) -> None:
         target = str(tmp_path / "map.yaml")
         before = {  # the Intel graph alone: no scans
-            "no mission with laser scans here; import a CARMEN log": (),
+            "no mission with laser scans or an occupancy grid here; import a CARMEN log": (),
             "no laser scans in 'intel'": ("-m", "intel"),
         }
         after = {

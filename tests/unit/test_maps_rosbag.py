@@ -17,14 +17,25 @@ from mapapi.core.errors import UsageError
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import EdgeKind, MissionGraph
-from mapapi.maps.rosbag import INFORMATION, read_bag
+from mapapi.maps.occupancy import OccupancyGrid
+from mapapi.maps.rosbag import INFORMATION, MapSource, read_bag
 from mapapi.maps.se3 import compose, inverse
 from mapapi.maps.source import detect_format, read_source
-from mapbench.bags import STORAGES, Messages, helix_pose, ring, write_bag
+from mapbench.bags import (
+    GRID_ORIGIN,
+    GRID_RESOLUTION,
+    STORAGES,
+    Messages,
+    helix_pose,
+    ring,
+    room_cells,
+    write_bag,
+)
 
 pytest.importorskip("rosbags")
 
 T0 = 1_700_000_000.0
+OCCUPANCY = "nav_msgs/msg/OccupancyGrid"
 
 
 def bag_at(tmp_path: Path, storage: str, **options: int | bool) -> Path:
@@ -33,7 +44,7 @@ def bag_at(tmp_path: Path, storage: str, **options: int | bool) -> Path:
     return write_bag(tmp_path / name, storage, **options)  # type: ignore[arg-type]
 
 
-def by_name(sources: list[MissionGraph | PointCloud]) -> dict[str, MissionGraph | PointCloud]:
+def by_name(sources: list[MapSource]) -> dict[str, MapSource]:
     return {s.name: s for s in sources}
 
 
@@ -113,15 +124,6 @@ class TestChoices:
         (graph,) = read_bag(tmp_path / "tf")
         assert graph.frame == "tf-odom/world"
 
-    def test_a_grid_is_skipped_and_refused_when_asked_for(
-        self, tmp_path: Path, caplog: pytest.LogCaptureFixture
-    ) -> None:
-        path = bag_at(tmp_path, "ros1", poses=5, grid=True)
-        assert "run-map" not in by_name(read_bag(path))
-        assert "/map skipped: occupancy grids" in caplog.text
-        with pytest.raises(UsageError, match=r"occupancy grids .* are not imported yet"):
-            read_bag(path, ["/map"])
-
     def test_unknown_topics_and_types_are_refused(self, tmp_path: Path) -> None:
         path = bag_at(tmp_path, "sqlite3", poses=5)
         with pytest.raises(UsageError, match=r"no topic '/nope'; it has /odom, /path"):
@@ -130,6 +132,34 @@ class TestChoices:
             read_bag(path, ["/tf_static"])
         with pytest.raises(UsageError, match="ROS bags only"):
             read_source(tmp_path / "run" / "metadata.yaml", "g2o", topics=["/odom"])
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_the_last_occupancy_grid_becomes_a_grid_mission(tmp_path: Path, storage: str) -> None:
+    path = bag_at(tmp_path, storage, poses=5, grid=True)
+    grid = by_name(read_bag(path))["run-map"]
+    assert isinstance(grid, OccupancyGrid)
+    assert grid.frame == "run-map/map"
+    assert np.array_equal(grid.cells, room_cells())  # the second message, not the unknown first
+    assert (grid.x0, grid.y0, grid.z) == GRID_ORIGIN[:3]
+    assert grid.resolution == GRID_RESOLUTION  # 0.05, not its float32 0.0500000007
+    assert grid.stamp == pytest.approx(T0 + 0.4, abs=1e-6)
+    assert [s.name for s in read_bag(path, ["/map"])] == ["run-map"]
+
+
+def test_a_rotated_grid_is_refused_naming_its_topic(tmp_path: Path) -> None:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    build = Messages(store, ros1=False)
+    turned = (1.0, 2.0, 0.0, 0.0, 0.0, math.sin(0.25), math.cos(0.25))  # 30 degrees of yaw
+    with Writer(tmp_path / "turned", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        topic = writer.add_connection("/floor/map", OCCUPANCY, typestore=store)
+        message = build.grid(1, room_cells(4, 3), turned)
+        writer.write(topic, 1, store.serialize_cdr(message, OCCUPANCY))
+    with pytest.raises(MapImportError, match=r"topic /floor/map, message 0 .* rotated"):
+        read_bag(tmp_path / "turned")
 
 
 class TestErrors:
