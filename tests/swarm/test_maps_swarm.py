@@ -19,6 +19,7 @@ from mapapi.maps import (
     VERTICES,
     import_cloud,
     import_graph,
+    import_missions,
     list_missions,
     load_cloud,
     read_g2o,
@@ -183,3 +184,25 @@ async def test_a_mission_exports_the_same_bytes_on_another_peer(
 
     assert (tmp_path / "b.g2o").read_bytes() == (tmp_path / "a.g2o").read_bytes()
     assert (tmp_path / "b.g2o").read_bytes() == INTEL.read_bytes()
+
+
+async def test_a_grid_is_found_loaded_and_written_by_another_peer(
+    make_peer: MakePeer, tmp_path: Path
+) -> None:
+    from mapapi.maps.grid_ops import GridOperations
+    from mapapi.maps.occupancy import OccupancyGrid, nav2_pixels
+    from mapapi.maps.schema import GRIDS
+
+    a, b = await lookup_swarm(make_peer, 2)
+    cells = (np.arange(300 * 100) % 102 - 1).astype(np.int8).reshape(100, 300)  # two tiles
+    grid = OccupancyGrid("floor", "r1", "floor/map", 0.05, -2.0, 1.0, 0.0, cells)
+    (result,) = await import_missions(a, [grid])
+    found = await found_by_table(b, BBox(-1, 2, -1, 1, 3, 1))
+    assert found[GRIDS] == [("floor",)]
+
+    loaded = await MapOperations(b).load_bbox([-1, 2, -1, 1, 3, 1])
+    assert sorted(c["chunk"] for c in loaded["loaded"]) == sorted(result.all_chunks())
+    info = await GridOperations(b).grid_map(str(tmp_path / "floor.yaml"), ["floor"])
+    assert (info["width"], info["height"], info["origin"]) == (300, 100, [-2.0, 1.0, 0.0])
+    image = (tmp_path / "floor.pgm").read_bytes()
+    assert image.endswith(nav2_pixels(cells).tobytes())
