@@ -7,6 +7,7 @@ from typing import Any
 
 import click
 
+from mapctl.commands.maps import missions_option
 from mapctl.session import Session, json_option, pass_session
 
 
@@ -30,14 +31,7 @@ def _row(frame: dict[str, Any]) -> tuple[str, ...]:
 
 
 @click.command("align")
-@click.option(
-    "--mission",
-    "-m",
-    "names",
-    multiple=True,
-    help="Align this mission, or those matching a pattern like 'tunnels-*' (repeat; "
-    "default: every pose graph held here).",
-)
+@missions_option("Align", "every pose graph held here")
 @click.option(
     "--anchor",
     help="The mission whose frame is the world (default: the one with the most "

@@ -217,7 +217,7 @@ def _bbox_option(text: str) -> Any:
     )
 
 
-def _missions_option(verb: str, default: str) -> Any:
+def missions_option(verb: str, default: str) -> Any:
     """`-m/--mission NAME`, repeatable, shell patterns allowed."""
     return click.option(
         "--mission",
@@ -231,7 +231,7 @@ def _missions_option(verb: str, default: str) -> Any:
 
 @click.command("plot")
 @_bbox_option("Outline this box (and, without --mission, draw the missions it overlaps).")
-@_missions_option("Draw", "every mission held here")
+@missions_option("Draw", "every mission held here")
 @click.option(
     "--up",
     type=click.Choice(["auto", "x", "y", "z"]),
@@ -286,7 +286,7 @@ def plot(
 
 @click.command("grid")
 @_output_option("The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm).")
-@_missions_option("Cast the scans of", "every mission held here with laser scans")
+@missions_option("Cast the scans of", "every mission held here with laser scans")
 @_bbox_option("The grid covers this box's x and y (default: every scan's rays).")
 @click.option(
     "--resolution",
