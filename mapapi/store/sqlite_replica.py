@@ -119,14 +119,7 @@ def install(
         )
     con.execute("INSERT OR IGNORE INTO tables (name, type_name) VALUES (?, ?)", (table, type_name))
     add_chunk(con, chunk_id, table, 0)
-    had = [
-        CommitId(r[0])
-        for r in con.execute(
-            "SELECT id FROM commits WHERE no IN (SELECT DISTINCT commit_no FROM revisions "
-            f"WHERE chunk_no = {CHUNK_NO})",
-            (chunk_id,),
-        )
-    ]
+    had = [c.id for c in chunk_commits(path, con, chunk_id)]
     con.execute(f"DELETE FROM revisions WHERE chunk_no = {CHUNK_NO}", (chunk_id,))
     con.execute("DELETE FROM meta WHERE key = 'labels'")  # the label index lists them
     by_commit: dict[CommitId, list[Revision]] = {c.id: [] for c in commits}
