@@ -47,6 +47,8 @@ def test_a_format_1_store_reads_as_it_did_and_takes_new_commits(tmp_path: Path) 
     store = SqliteStore(_format1(tmp_path))
     try:
         assert store.get_meta("version") == "2"
+        # the old tables' pages were given back, not left free in the file
+        assert store._con().execute("PRAGMA freelist_count").fetchone() == (0,)
         assert store.clock() == want["clock"]
         assert [_plain(asdict(c)) for c in store.commits()] == want["commits"]
         for item, history in want["history"].items():
