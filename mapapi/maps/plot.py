@@ -1,9 +1,11 @@
 """Top-down pictures of missions: trajectories, loop closures, inter-robot edges,
 landmarks (small crosses), point clouds and a query box, as a PNG.
 
-The view looks down the "up" axis, by default the axis along which everything
-drawn is thinnest (z for the Intel and garage graphs and the room scan, y for
-the tunnels set, recorded in camera axes). A picture of point clouds alone is
+The view looks down on the map from above (`view_axes`: up given, or told by
+the poses' own convention, else the axis along which the map is thinnest: z for
+the Intel and garage graphs and the room scan, -y for the tunnels set, recorded
+by cameras), its axes in metres named x and y as in a frame whose z is up, each
+with the map's own axis it shows. A picture of point clouds alone is
 rendered by open3d offscreen where a renderer works (`render3d`), else, and
 for everything else, drawn with matplotlib's Agg backend (no display needed).
 """
@@ -23,7 +25,7 @@ from mapapi.core.errors import UsageError
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.graph import EdgeKind, MissionGraph
-from mapapi.maps.view_axes import AXES, choose_up, plane_axes
+from mapapi.maps.view_axes import AXES, Z_UP, Up, choose_up, plane_axes
 
 log = logging.getLogger(__name__)
 
@@ -34,7 +36,8 @@ _PALETTE = [f"C{i}" for i in range(10) if i != 7]  # C7 is grey: kept for the ed
 
 @dataclass(frozen=True)
 class PlotResult:
-    """What `plot_map` drew: the renderer, the axis it looked down and the missions."""
+    """What `plot_map` drew: the renderer, the map's up it looked down along
+    (`x`, `-y`...) and the missions."""
 
     renderer: str
     up: str
@@ -65,7 +68,8 @@ def plot_map(
     boxes = [b for b in (*(g.bbox() for g in graphs), *(c.bbox() for c in clouds)) if b]
     if not boxes:
         raise UsageError("nothing to plot: the missions chosen have no vertices or points")
-    axis = choose_up(boxes + ([box] if box else []), up)
+    poses = [np.array([g.vertices[k] for k in sorted(g.vertices)]) for g in graphs if g.vertices]
+    looking = choose_up(boxes + ([box] if box else []), up, poses)
     names = [g.name for g in graphs] + [c.name for c in clouds]
     if zoom and box is None:
         raise UsageError("zoom needs a box to zoom to")
@@ -73,10 +77,10 @@ def plot_map(
         from mapapi.maps.render3d import render_cloud
 
         points = np.concatenate([c.points for c in clouds])
-        if not zoom and render_cloud(points, output, box=box, up=axis):
-            return PlotResult("open3d", AXES[axis], names)
-    _draw(output, graphs, clouds, box, axis, zoom=zoom, title=title, labels=labels or {})
-    return PlotResult("matplotlib", AXES[axis], names)
+        if not zoom and render_cloud(points, output, box=box, up=looking):
+            return PlotResult("open3d", looking.name, names)
+    _draw(output, graphs, clouds, box, looking, zoom=zoom, title=title, labels=labels or {})
+    return PlotResult("matplotlib", looking.name, names)
 
 
 def _draw(
@@ -84,7 +88,7 @@ def _draw(
     graphs: Sequence[MissionGraph],
     clouds: Sequence[PointCloud],
     box: BBox | None,
-    up: int,
+    up: Up,
     *,
     zoom: bool,
     title: str | None,
@@ -109,18 +113,19 @@ def _draw(
     if box is not None:
         _inside(ax, graphs, box, u, v)
         _box(ax, box, u, v)
-    ax.set_xlabel(f"{AXES[u]} [m]")
-    ax.set_ylabel(f"{AXES[v]} [m]")
+    ax.set_xlabel(axis_label("x", u, up))
+    ax.set_ylabel(axis_label("y", v, up))
     ax.set_aspect("equal", adjustable="box" if zoom else "datalim")
     if zoom and box is not None:
         _zoom(ax, box, u, v)
-    ax.set_title(title or f"top-down view (looking down {AXES[up]})")
+    ax.set_title(title or f"top-down view (up: the map's {up.name})")
     ax.grid(True, linewidth=0.3, alpha=0.5)
-    _scale_bar(ax)
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best", fontsize="small", markerscale=2)
+        # beside the map, not on it: eight robots' entries would hide a corner of it
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", markerscale=2)
+    _scale_bar(ax)
     figure.tight_layout()
-    figure.savefig(str(output))
+    figure.savefig(str(output), bbox_inches="tight")  # the legend beside the map included
 
 
 def _scale_bar(ax: Any) -> None:
@@ -147,15 +152,23 @@ def _scale_bar(ax: Any) -> None:
         ax.add_artist(bar)
 
 
-def _scatter(ax: Any, figure: Any, cloud: PointCloud, u: int, v: int, up: int) -> None:
+def axis_label(name: str, axis: int, up: Up) -> str:
+    """A picture axis's label: `name` in metres, and the map's axis it shows
+    where the map's frame does not have z up."""
+    if up == Z_UP:
+        return f"{name} [m]"
+    return f"{name} [m] (map {AXES[axis]})"
+
+
+def _scatter(ax: Any, figure: Any, cloud: PointCloud, u: int, v: int, up: Up) -> None:
     points = cloud.points
     if len(points) > MAX_SCATTER:
         keep = np.random.default_rng(_SEED).choice(len(points), MAX_SCATTER, replace=False)
         points = points[keep]
     drawn = ax.scatter(
-        points[:, u], points[:, v], c=points[:, up], s=0.3, cmap="viridis", linewidths=0
+        points[:, u], points[:, v], c=up.height(points), s=0.3, cmap="viridis", linewidths=0
     )
-    figure.colorbar(drawn, ax=ax, label=f"{cloud.name}: {AXES[up]} [m]", shrink=0.7)
+    figure.colorbar(drawn, ax=ax, label=f"{cloud.name}: height along {up.name} [m]", shrink=0.7)
 
 
 def _colours(graphs: Sequence[MissionGraph]) -> dict[str, str]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import Points
-from mapapi.maps.view_axes import plane_axes
+from mapapi.maps.view_axes import UP_CHOICES, Z_UP, Up, choose_up, plane_axes
 
 log = logging.getLogger(__name__)
 
@@ -33,16 +33,16 @@ _unavailable: list[str] = []  # why the renderer failed in this process, once it
 
 
 def render_cloud(
-    points: Points, output: str | Path, *, box: BBox | None = None, up: int = 2
+    points: Points, output: str | Path, *, box: BBox | None = None, up: Up = Z_UP
 ) -> bool:
-    """Render `points` looking down axis `up` into the PNG `output`, with `box`
+    """Render `points` seen from above along `up` into the PNG `output`, with `box`
     outlined; False (and nothing written) when no open3d renderer works here."""
     if os.environ.get("MAPAPI_RENDER3D", "1") == "0" or _unavailable:
         return False
     with tempfile.TemporaryDirectory(prefix="mapapi-render-") as tmp:
         data = Path(tmp) / "points.npy"
         np.save(data, np.asarray(points, dtype=np.float32))
-        command = [sys.executable, "-m", __name__, str(data), str(output), "--up", str(up)]
+        command = [sys.executable, "-m", __name__, str(data), str(output), f"--up={up.name}"]
         if box is not None:
             command += ["--box", *(repr(v) for v in box.as_tuple())]
         try:
@@ -67,18 +67,22 @@ def _colours(heights: np.ndarray) -> np.ndarray:
     return np.asarray(rgba[:, :3], dtype=np.float64)
 
 
-def _box_lines(o3d: Any, box: BBox, up: int, top: float) -> Any:
-    """The box's edges, its top raised to `top` so that no point hides it from above."""
-    maxs = np.array(box.maxs)
-    maxs[up] = max(maxs[up], top)
+def _box_lines(o3d: Any, box: BBox, up: Up, lo: np.ndarray, hi: np.ndarray) -> Any:
+    """The box's edges, its top raised to the highest point (`lo`..`hi` bound
+    them all) so that no point hides it from above."""
+    mins, maxs = np.array(box.mins), np.array(box.maxs)
+    if up.sign > 0:
+        maxs[up.axis] = max(maxs[up.axis], hi[up.axis])
+    else:
+        mins[up.axis] = min(mins[up.axis], lo[up.axis])
     lines = o3d.geometry.LineSet.create_from_axis_aligned_bounding_box(
-        o3d.geometry.AxisAlignedBoundingBox(np.array(box.mins), maxs)
+        o3d.geometry.AxisAlignedBoundingBox(mins, maxs)
     )
     lines.paint_uniform_color([1.0, 0.0, 0.0])
     return lines
 
 
-def _render(points: np.ndarray, output: str, box: BBox | None, up: int) -> None:
+def _render(points: np.ndarray, output: str, box: BBox | None, up: Up) -> None:
     import open3d as o3d
 
     rendering = o3d.visualization.rendering
@@ -86,7 +90,7 @@ def _render(points: np.ndarray, output: str, box: BBox | None, up: int) -> None:
     renderer.scene.set_background([1.0, 1.0, 1.0, 1.0])
     renderer.scene.view.set_post_processing(False)  # tone mapping would wash the colours out
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points.astype(np.float64)))
-    cloud.colors = o3d.utility.Vector3dVector(_colours(points[:, up]))
+    cloud.colors = o3d.utility.Vector3dVector(_colours(up.height(points)))
     material = rendering.MaterialRecord()
     material.shader = "defaultUnlit"
     material.point_size = 3.0
@@ -97,15 +101,16 @@ def _render(points: np.ndarray, output: str, box: BBox | None, up: int) -> None:
         lines = rendering.MaterialRecord()
         lines.shader = "unlitLine"
         lines.line_width = 3.0
-        renderer.scene.add_geometry("box", _box_lines(o3d, box, up, float(hi[up])), lines)
+        renderer.scene.add_geometry("box", _box_lines(o3d, box, up, lo, hi), lines)
     centre, extent = (lo + hi) / 2, (hi - lo) * 1.05 + 1e-3
     u, v = plane_axes(up)
     aspect = SIZE[0] / SIZE[1]
     half_w = max(extent[u], extent[v] * aspect) / 2
     half_h = half_w / aspect
-    depth = float(extent[up]) + 10.0
-    # look down `up` from above, with the picture's vertical axis pointing up as in `plot`
-    renderer.setup_camera(60.0, centre, centre + np.eye(3)[up] * depth, np.eye(3)[v])
+    depth = float(extent[up.axis]) + 10.0
+    # look down from above along `up`, the picture's vertical axis pointing up as in `plot`
+    eye = centre + np.eye(3)[up.axis] * up.sign * depth
+    renderer.setup_camera(60.0, centre, eye, np.eye(3)[v])
     renderer.scene.camera.set_projection(
         rendering.Camera.Projection.Ortho, -half_w, half_w, -half_h, half_h, 0.1, 3 * depth
     )
@@ -117,11 +122,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m mapapi.maps.render3d")
     parser.add_argument("points", help="an .npy file of (n, 3) float32 points")
     parser.add_argument("output", help="the PNG to write")
-    parser.add_argument("--up", type=int, default=2, choices=(0, 1, 2))
+    parser.add_argument("--up", default="z", choices=UP_CHOICES[1:])
     parser.add_argument("--box", type=float, nargs=6)
     args = parser.parse_args(argv)
     box = BBox(*args.box) if args.box else None
-    _render(np.load(args.points), args.output, box, args.up)
+    _render(np.load(args.points), args.output, box, choose_up([], args.up))
 
 
 if __name__ == "__main__":

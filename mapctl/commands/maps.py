@@ -11,6 +11,7 @@ from mapctl.session import Session, json_option, pass_session
 
 FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosbag")
 EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag")  # mapapi.maps.jobs.EXPORT_FORMATS
+UP_CHOICES = ("auto", "x", "y", "z", "-x", "-y", "-z")  # mapapi.maps.view_axes.UP_CHOICES
 
 
 def _bbox_text(box: list[float] | None) -> str:
@@ -234,13 +235,14 @@ def missions_option(verb: str, default: str) -> Any:
 @missions_option("Draw", "every mission held here")
 @click.option(
     "--up",
-    type=click.Choice(["auto", "x", "y", "z"]),
+    type=click.Choice(UP_CHOICES),
     default="auto",
     show_default=True,
-    help="The axis to look down (auto: the one along which the map is thinnest).",
+    help="The map's up, looked down along from above (auto: as the poses' body convention "
+    "tells, else the axis along which the map is thinnest); -y for a camera's frame.",
 )
 @click.option("--zoom", is_flag=True, help="Show the --bbox box and its surroundings only.")
-@click.option("--title", help="The picture's title (default: the axis it looks down).")
+@click.option("--title", help="The picture's title (default: the map's up).")
 @frame_option("Draw the trajectories")
 @_output_option("The PNG to write.")
 @json_option
@@ -279,7 +281,7 @@ def plot(
         render.emit_json(info)
         return
     render.line(
-        f"wrote {output}: {len(info['missions'])} mission(s), looking down {info['up']} "
+        f"wrote {output}: {len(info['missions'])} mission(s), seen from above along {info['up']} "
         f"({info['renderer']})"
     )
 

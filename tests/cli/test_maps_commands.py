@@ -216,7 +216,7 @@ class TestPlot:
         mapctl("import", str(ROOM))
         out = tmp_path / "room.png"
         text = mapctl("plot", "-m", "room_scan1", "-o", str(out))
-        assert "looking down z" in text
+        assert "seen from above along z" in text
         assert out.read_bytes().startswith(PNG)
 
     def test_missions_outside_the_box_are_left_out(self, intel: Mapctl, tmp_path: Path) -> None:
