@@ -28,7 +28,7 @@ import numpy as np
 
 from mapapi.core.errors import UsageError
 from mapapi.maps.bag_messages import FLOAT32_FIELD, PATH, POINT_CLOUD, POSE_STAMPED
-from mapapi.maps.cloud import Points, block_points
+from mapapi.maps.cloud import Points, block_points, moved
 from mapapi.maps.frames import MISSION, WORLD, frame_at, graph_in
 from mapapi.maps.schema import CLOUDS
 from mapapi.maps.se3 import Pose
@@ -95,7 +95,7 @@ def bag_content(peer: Peer, time: int, mission: str, frame: str = MISSION) -> Ba
     for block in blocks:
         points = block_points(block)
         if move is not None:
-            points = (points @ move[:3, :3].T + move[:3, 3]).astype(np.float32)
+            points = moved(points, move)
         stamp = when.get(block.vertex, 0.0) if block.HasField("vertex") else 0.0
         content.scans.append((stamp, points))
     return content

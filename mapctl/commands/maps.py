@@ -83,7 +83,8 @@ def import_map(
     """Import a map FILE: g2o pose graph (one mission per robot when its ids are
     GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
     cloud, CARMEN laser log (.clf, .clf.bz2), ROS bag (.bag, or a ROS 2 bag's
-    folder: one mission per pose or point cloud topic).
+    folder: one mission per pose, point cloud or occupancy grid topic; clouds
+    placed through /tf in the odometry's frame).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -112,6 +113,9 @@ def import_map(
     render.table(title, ["name", "robot", "size", "bbox", "commit"], rows)
     rate = f" ({info['elements_per_s']:,} elements/s)" if info["elements"] else ""
     render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
+    for m in info["missions"]:
+        for warning in m["warnings"]:
+            render.warning(f"{m['name']}: {warning}")
 
 
 def frame_option(what: str, where: str = "in each mission's own frame, or in") -> Any:

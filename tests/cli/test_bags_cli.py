@@ -12,6 +12,7 @@ import pytest
 
 from mapbench.bags import GRID_ORIGIN, STORAGES, room_cells, write_bag
 from tests.cli.conftest import Mapctl
+from tests.unit.test_maps_rosbag import tf_bag
 
 pytest.importorskip("rosbags")
 
@@ -85,6 +86,38 @@ class TestImport:
         asked = mapctl.main("import", str(tmp_path / "junk.bag"), "--topics", "/map")
         assert asked.code == EXIT_USAGE
         assert mapctl.json("log") == []
+
+
+class TestTf:
+    def test_a_lidar_cloud_is_placed_where_the_odometry_cloud_is(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        sensor = write_bag(tmp_path / "sensor", "mcap", poses=40, lidar=True)
+        plain = write_bag(tmp_path / "plain", "mcap", poses=40)
+        boxes = {}
+        for bag in (sensor, plain):
+            info = mapctl.json("import", str(bag), "--topics", "/odom,/points")
+            clouds = [m for m in info["missions"] if m["points"]]
+            assert [m["warnings"] for m in info["missions"]] == [[], []]
+            boxes[bag.name] = clouds[0]["bbox"]
+        assert boxes["sensor"] == pytest.approx(boxes["plain"], abs=1e-4)
+
+    def test_a_cloud_tf_cannot_place_is_kept_and_reported(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        moves = [(1, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        bag = tf_bag(tmp_path / "lost", moves, [(1, "camera", points)], mount=None)
+        info = mapctl.json("import", str(bag))
+        warnings = {m["name"]: m["warnings"] for m in info["missions"]}
+        assert warnings["lost-odom"] == []
+        (warning,) = warnings["lost-points"]
+        assert warning.startswith("topic /points: no TF path from camera to odom")
+        outcome = mapctl.main("import", str(bag), "--mission", "again-")
+        assert outcome.code == 0
+        assert outcome.err_lines[-1].startswith(
+            "again-points: topic /points: no TF path from camera to odom"
+        )
 
 
 def read_pgm(path: Path) -> np.ndarray:
