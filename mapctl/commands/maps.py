@@ -157,7 +157,7 @@ def export_map(
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
     its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD),
-    poses, path and points as a ROS 2 bag (MCAP)."""
+    poses, path, points and grid as a ROS 2 bag (MCAP)."""
     from mapctl import render
 
     info = session.call(
@@ -167,7 +167,10 @@ def export_map(
         render.emit_json(info)
         return
     if info["format"] == "bag":
-        what = f"{info['poses']} poses, {info['points']} points on {', '.join(info['topics'])}"
+        grid = f", a grid of {info['cells']:,} cells" if info["cells"] else ""
+        what = (
+            f"{info['poses']} poses, {info['points']} points{grid} on {', '.join(info['topics'])}"
+        )
     elif info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
         if info.get("landmarks"):
