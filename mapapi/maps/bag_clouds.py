@@ -17,6 +17,7 @@ is left out, and a warning counts them: its place would be a guess.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -86,15 +87,16 @@ class BagCloud:
         """Its points in frame `target` (see the module docstring); with no
         `target` (no trajectory read), in their own frame."""
         if target is None or all(scan.frame == target for scan in self.scans):
-            return Placed(_joined(s.points for s in self.scans), self.frame, [])
+            return self._as_given()
+        kept = f"its points stay in {self.frame or 'no frame'}, as its messages give them"
+        if any(not scan.frame for scan in self.scans):  # TF cannot place what names no frame
+            return self._as_given(f"topic {self.topic}: a message names no frame; {kept}")
         parts, refused = [], []
         for scan in self.scans:
             try:
                 pose = tf.lookup(target, scan.frame, scan.stamp)
             except NoTfPath as exc:
-                kept = f"its points stay in {self.frame}, as its messages give them"
-                warning = f"topic {self.topic}: {exc}; {kept}"
-                return Placed(_joined(s.points for s in self.scans), self.frame, [warning])
+                return self._as_given(f"topic {self.topic}: {exc}; {kept}")
             except TfOutOfRange as exc:
                 refused.append(exc)
                 continue
@@ -108,7 +110,11 @@ class BagCloud:
             )
         return Placed(_joined(parts), target, warnings)
 
+    def _as_given(self, *warnings: str) -> Placed:
+        """Every point as its message gives it, in the first message's frame."""
+        return Placed(_joined(s.points for s in self.scans), self.frame, list(warnings))
 
-def _joined(parts: Any) -> Points:
+
+def _joined(parts: Iterable[Points]) -> Points:
     found = list(parts)
     return np.concatenate(found) if found else np.zeros((0, 3), np.float32)

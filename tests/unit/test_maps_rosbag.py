@@ -210,6 +210,20 @@ class TestTfPlacesClouds:
             "odom in that of odom; its points stay in camera, as its messages give them"
         ]
 
+    def test_a_cloud_that_names_no_frame_stays_and_says_so(self, tmp_path: Path) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        path = tf_bag(tmp_path / "bare", [(1, turned(0.0, 0.0))], [(1, "", points)])
+        cloud = by_name(read_bag(path))["bare-points"]
+        assert isinstance(cloud, PointCloud)
+        assert (cloud.frame, cloud.warnings) == (
+            "bare-points/map",
+            [
+                "topic /points: a message names no frame; its points stay in no frame, "
+                "as its messages give them"
+            ],
+        )
+        assert np.array_equal(cloud.points, points)
+
     def test_scans_stamped_outside_the_tf_are_left_out_and_counted(self, tmp_path: Path) -> None:
         moves = [(10**9 * k, turned(float(k), 0.0)) for k in (1, 2)]
         ring_points = ring(helix_pose(0), 4).astype(np.float32)
