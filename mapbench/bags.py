@@ -7,9 +7,14 @@ child `base_link`), the same poses as one `nav_msgs/Path` on `/path` (frame
 points around the robot as `sensor_msgs/PointCloud2` on `/points` (frame `odom`)
 and, if asked, a `nav_msgs/OccupancyGrid` on `/map`: twice, all unknown then
 a room of 300 x 200 cells of 5 cm (`room_cells`), as a mapper republishes its map.
+With `lidar`, the ring comes from a lidar on the robot, as a sensor gives it:
+in frame `lidar` (mounted at `LIDAR_MOUNT` on `base_link`, in `/tf_static`),
+with the robot's odom -> base_link on `/tf` at each pose; placed through TF,
+it is the same ring in `odom`.
 
     python -m mapbench.bags run1.bag --poses 200          # ROS 1
     python -m mapbench.bags run2 --storage mcap          # ROS 2, a folder
+    python -m mapbench.bags run3 --storage mcap --lidar  # clouds in a sensor's frame
 """
 
 from __future__ import annotations
@@ -21,14 +26,18 @@ from typing import Any
 
 import numpy as np
 
+from mapapi.maps.alignment import pose_matrix
 from mapapi.maps.bag_export import cloud_message, pose_message
-from mapapi.maps.se3 import Pose
+from mapapi.maps.cloud import moved
+from mapapi.maps.se3 import IDENTITY, Pose, compose, inverse
 
 STORAGES = ("ros1", "sqlite3", "mcap")
 _T0 = 10**9 * 1_700_000_000  # the first message's time, ns
 GRID_RESOLUTION = 0.05
 GRID_ORIGIN: Pose = (-7.5, -5.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 """The corner of `room_cells` in the bags' grid: the room spans x -7.5..7.5, y -5..5."""
+LIDAR_MOUNT: Pose = (0.3, 0.0, 0.2, 0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+"""The lidar's pose on base_link: 30 cm ahead, 20 cm up, turned 90 degrees left."""
 
 
 def helix_pose(i: int) -> Pose:
@@ -91,12 +100,13 @@ class Messages:
         """A `sensor_msgs/PointCloud2` of float32 x, y, z."""
         return cloud_message(self.types, self.header(ns, frame), points)
 
-    def tf(self, ns: int, parent: str, child: str) -> Any:
-        """A `tf2_msgs/TFMessage` of one identity transform."""
+    def tf(self, ns: int, parent: str, child: str, pose: Pose = IDENTITY) -> Any:
+        """A `tf2_msgs/TFMessage` of one transform: `child`'s pose in `parent`."""
         t = self.types
+        x, y, z, qx, qy, qz, qw = pose
         transform = t["geometry_msgs/msg/Transform"](
-            translation=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            translation=t["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
         )
         stamped = t["geometry_msgs/msg/TransformStamped"](
             header=self.header(ns, parent), child_frame_id=child, transform=transform
@@ -151,6 +161,7 @@ def write_bag(
     cloud_every: int = 10,
     cloud_points: int = 64,
     grid: bool = False,
+    lidar: bool = False,
 ) -> Path:
     """Write a helix bag (see the module docstring) at `path`: a `.bag` file for
     `ros1`, a folder for `sqlite3` and `mcap`. Returns `path`."""
@@ -178,10 +189,20 @@ def write_bag(
         odom = connect("/odom", "nav_msgs/msg/Odometry")
         cloud = connect("/points", "sensor_msgs/msg/PointCloud2") if cloud_every else None
         put(tf, stamps[0], build.tf(stamps[0], "map", "odom"))
+        moving = connect("/tf", "tf2_msgs/msg/TFMessage") if lidar else None
+        if lidar:
+            put(tf, stamps[0], build.tf(stamps[0], "base_link", "lidar", LIDAR_MOUNT))
         for i, (ns, pose) in enumerate(zip(stamps, track, strict=True)):
             put(odom, ns, build.odometry(ns, pose))
+            if moving is not None:
+                put(moving, ns, build.tf(ns, "odom", "base_link", pose))
             if cloud is not None and i % cloud_every == 0:
-                put(cloud, ns, build.cloud(ns, ring(pose, cloud_points)))
+                points = ring(pose, cloud_points)
+                if lidar:  # as the lidar sees them: odom -> lidar is inverse(pose . mount)
+                    sensor = pose_matrix(inverse(compose(pose, LIDAR_MOUNT)))
+                    put(cloud, ns, build.cloud(ns, moved(points, sensor), "lidar"))
+                else:
+                    put(cloud, ns, build.cloud(ns, points))
         if poses:
             put(connect("/path", "nav_msgs/msg/Path"), stamps[-1], build.path(stamps, track))
         if grid:  # an unknown map first: the last message is the map
@@ -214,9 +235,12 @@ def main() -> None:
     parser.add_argument("--cloud-every", type=int, default=10, help="0: no clouds")
     parser.add_argument("--cloud-points", type=int, default=64)
     parser.add_argument("--grid", action="store_true", help="add an OccupancyGrid on /map")
+    parser.add_argument(
+        "--lidar", action="store_true", help="clouds in a lidar's frame, placed by /tf"
+    )
     args = parser.parse_args()
     options = {name: getattr(args, name) for name in ("poses", "cloud_every", "cloud_points")}
-    write_bag(args.path, args.storage, grid=args.grid, **options)
+    write_bag(args.path, args.storage, grid=args.grid, lidar=args.lidar, **options)
     print(f"wrote {args.path} ({args.storage}): {args.poses} poses")
 
 

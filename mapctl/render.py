@@ -144,6 +144,11 @@ def error(text: str) -> None:
     Console(stderr=True, highlight=False).print(Text(text, style="red"))
 
 
+def warning(text: str) -> None:
+    """A yellow line on stderr: something done, but not all that was asked."""
+    Console(stderr=True, highlight=False, soft_wrap=True).print(Text(text, style="yellow"))
+
+
 def note(text: str) -> None:
     """One line for humans on stderr (keeps stdout for what scripts read)."""
     Console(stderr=True, highlight=False, soft_wrap=True).print(Text(text, style="dim"))

@@ -9,11 +9,15 @@ valid ROS name: `t1-odom` gives `/t1_odom/...`):
 - `/M/path`: one `nav_msgs/Path` of every pose, stamped with the last pose's time;
 - `/M/cloud`: a `sensor_msgs/PointCloud2` (float32 x, y, z) per stored point
   block: a laser scan's block is stamped with its vertex's time, a cloud's
-  blocks with time 0.
+  blocks with time 0;
+- `/M/map`: one `nav_msgs/OccupancyGrid` of its stored grid (a bag's grid
+  mission: `mapapi.maps.occupancy`), its tiles put back together cell for
+  cell, at their resolution and origin, stamped with the grid's stamp.
 
 Every message's frame is the mission's frame (`Mission.frame`) or, with
 `frame="world"`, `world`, the poses and points moved by the mission's place
-there (`mapctl align`). Each message is also recorded at its stamp. `rosbags`
+there (`mapctl align`; a grid is written in its mission's frame only: turning
+it would resample its cells). Each message is also recorded at its stamp. `rosbags`
 is imported when a bag is written.
 """
 
@@ -27,10 +31,18 @@ from typing import Any
 import numpy as np
 
 from mapapi.core.errors import UsageError
-from mapapi.maps.bag_messages import FLOAT32_FIELD, PATH, POINT_CLOUD, POSE_STAMPED
-from mapapi.maps.cloud import Points, block_points
+from mapapi.maps.bag_messages import (
+    FLOAT32_FIELD,
+    OCCUPANCY_GRID,
+    PATH,
+    POINT_CLOUD,
+    POSE_STAMPED,
+)
+from mapapi.maps.cloud import Points, block_points, moved
 from mapapi.maps.frames import MISSION, WORLD, frame_at, graph_in
-from mapapi.maps.schema import CLOUDS
+from mapapi.maps.grid import GridSpec
+from mapapi.maps.occupancy import OccupancyGrid, compose_tiles
+from mapapi.maps.schema import CLOUDS, GRIDS, GridTile
 from mapapi.maps.se3 import Pose
 from mapapi.maps.stored import rows_of
 from mapapi.maps.trajectory import trajectory_of
@@ -57,6 +69,7 @@ class BagContent:
         stamps, poses: the trajectory, in index order (empty for a cloud).
         timed: the stamps are the vertices' own timestamps (else their indices).
         scans: (stamp in seconds, points) per stored point block.
+        grid: its stored occupancy grid, if it has one.
     """
 
     mission: str
@@ -65,16 +78,23 @@ class BagContent:
     poses: list[Pose] = field(default_factory=list)
     timed: bool = False
     scans: list[tuple[float, Points]] = field(default_factory=list)
+    grid: OccupancyGrid | None = None
 
 
 def bag_content(peer: Peer, time: int, mission: str, frame: str = MISSION) -> BagContent:
     """Read `mission` as of `time` for a bag, its poses and points in `frame`.
 
     Raises:
-        UsageError: in the world frame, the mission was never aligned.
+        UsageError: in the world frame, the mission was never aligned or has a grid.
         MapImportError: no such mission.
     """
     graph = graph_in(peer, time, mission, frame)
+    tiles = rows_of(peer, time, GRIDS, mission)
+    if tiles and frame != MISSION:
+        raise UsageError(
+            f"mission {mission!r} holds an occupancy grid, which a bag holds in its "
+            "mission's frame only (--frame mission)"
+        )
     trajectory = trajectory_of(graph)
     content = BagContent(mission, graph.frame or f"{mission}/map")
     content.stamps, content.poses, content.timed = (
@@ -95,10 +115,33 @@ def bag_content(peer: Peer, time: int, mission: str, frame: str = MISSION) -> Ba
     for block in blocks:
         points = block_points(block)
         if move is not None:
-            points = (points @ move[:3, :3].T + move[:3, 3]).astype(np.float32)
+            points = moved(points, move)
         stamp = when.get(block.vertex, 0.0) if block.HasField("vertex") else 0.0
         content.scans.append((stamp, points))
+    if tiles:
+        content.grid = stored_grid(graph.name, graph.robot, content.frame, tiles)
     return content
+
+
+def stored_grid(name: str, robot: str, frame: str, tiles: list[GridTile]) -> OccupancyGrid:
+    """The grid a mission's tiles were cut from (`occupancy.grid_tiles`): cell for
+    cell, its corner the lowest tile's, its stamp theirs.
+
+    Raises:
+        UsageError: tiles of more than one resolution (no import makes them).
+    """
+    sides = {t.resolution for t in tiles}
+    if len(sides) > 1:
+        found = ", ".join(map(str, sorted(sides)))
+        raise UsageError(f"mission {name!r} holds grid tiles of {found} m a cell: not one grid")
+    side = sides.pop()
+    x0, y0 = min(t.x for t in tiles), min(t.y for t in tiles)
+    # tile corners lie on the grid's lattice: a whole number of cells from x0, y0
+    width = max(round((t.x - x0) / side) + t.width for t in tiles)
+    height = max(round((t.y - y0) / side) + t.height for t in tiles)
+    cells = compose_tiles(tiles, GridSpec(x0, y0, side, width, height))
+    z = tiles[0].bbox.zmin
+    return OccupancyGrid(name, robot, frame, side, x0, y0, z, cells, max(t.stamp for t in tiles))
 
 
 def write_bag(content: BagContent, target: Path) -> dict[str, Any]:
@@ -110,8 +153,10 @@ def write_bag(content: BagContent, target: Path) -> dict[str, Any]:
     """
     if target.exists():
         raise UsageError(f"{target} exists; a bag is a new folder: remove it or choose another")
-    if not content.poses and not content.scans:
-        raise UsageError(f"mission {content.mission!r} has neither poses nor points to write")
+    if not content.poses and not content.scans and content.grid is None:
+        raise UsageError(
+            f"mission {content.mission!r} has neither poses, points nor a grid to write"
+        )
     try:
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
@@ -141,9 +186,13 @@ def write_bag(content: BagContent, target: Path) -> dict[str, Any]:
         if content.scans:
             clouds = [(s, build.cloud(s, points)) for s, points in content.scans]
             put(f"{prefix}/cloud", POINT_CLOUD, clouds)
+        if content.grid is not None:
+            grid = content.grid
+            put(f"{prefix}/map", OCCUPANCY_GRID, [(grid.stamp, build.grid(grid))])
     return {
         "poses": len(content.poses),
         "points": sum(len(p) for _, p in content.scans),
+        "cells": 0 if content.grid is None else int(content.grid.cells.size),
         "time": "timestamp" if content.timed else "index",
         "topics": topics,
     }
@@ -178,6 +227,20 @@ class _Builder:
 
     def cloud(self, stamp: float, points: Points) -> Any:
         return cloud_message(self.types, self.header(stamp), points)
+
+    def grid(self, grid: OccupancyGrid) -> Any:
+        """A `nav_msgs/OccupancyGrid` of `grid`: its cells as stored, row 0 the bottom."""
+        header = self.header(grid.stamp)
+        height, width = grid.cells.shape
+        info = self.types["nav_msgs/msg/MapMetaData"](
+            map_load_time=header.stamp,
+            resolution=grid.resolution,
+            width=width,
+            height=height,
+            origin=pose_message(self.types, (grid.x0, grid.y0, grid.z, 0.0, 0.0, 0.0, 1.0)),
+        )
+        data = np.ascontiguousarray(grid.cells, dtype=np.int8).reshape(-1)
+        return self.types[OCCUPANCY_GRID](header=header, info=info, data=data)
 
 
 def pose_message(types: Any, pose: Pose) -> Any:

@@ -43,7 +43,19 @@ def pose_of(pose: Any) -> Pose:
     Raises:
         ValueError: a value is not finite, or the quaternion is zero.
     """
-    p, q = pose.position, pose.orientation
+    return _unit_pose(pose.position, pose.orientation)
+
+
+def transform_of(transform: Any) -> Pose:
+    """A `geometry_msgs/Transform` as a pose 7-tuple (as `pose_of`).
+
+    Raises:
+        ValueError: a value is not finite, or the quaternion is zero.
+    """
+    return _unit_pose(transform.translation, transform.rotation)
+
+
+def _unit_pose(p: Any, q: Any) -> Pose:
     values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
     if not all(map(math.isfinite, values)):
         raise ValueError(f"the pose {values} has a value that is not a finite number")
@@ -115,9 +127,25 @@ def cloud_points(message: Any) -> tuple[Points, int]:
     return points[finite], int(len(points) - int(finite.sum()))
 
 
-def tf_parents(message: Any) -> dict[str, str]:
-    """child frame -> parent frame, for each transform of a TF message."""
-    return {frame_name(t.child_frame_id): frame_name(t.header.frame_id) for t in message.transforms}
+Link = tuple[str, str, float, Pose]
+"""(parent frame, child frame, stamp in seconds, the child's pose in the parent)."""
+
+
+def tf_links(message: Any) -> list[Link]:
+    """The transforms of a TF message, each from its header's frame to its child.
+
+    Raises:
+        ValueError: a transform that is not finite, or of a zero quaternion.
+    """
+    return [
+        (
+            frame_name(t.header.frame_id),
+            frame_name(t.child_frame_id),
+            stamp_seconds(t.header.stamp),
+            transform_of(t.transform),
+        )
+        for t in message.transforms
+    ]
 
 
 GridCells = tuple[float, float, float, float, npt.NDArray[np.int8]]

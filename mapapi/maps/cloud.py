@@ -39,6 +39,11 @@ def as_points(values: npt.ArrayLike) -> Points:
     return points
 
 
+def moved(points: Points, matrix: npt.NDArray[np.float64]) -> Points:
+    """`points` moved by the 4x4 rigid `matrix` (`alignment.pose_matrix`), as float32."""
+    return (points @ matrix[:3, :3].T + matrix[:3, 3]).astype(np.float32)
+
+
 def points_box(points: Points) -> BBox | None:
     """The box around `points` (None when there are none)."""
     if len(points) == 0:
@@ -57,6 +62,8 @@ class PointCloud:
         frame: the frame its points are in.
         points: (n, 3) float32 positions in metres.
         dropped: points of the source left out because a coordinate was not finite.
+        warnings: what its reader could not do, one line each (a bag's cloud that
+            TF does not place: `mapapi.maps.bag_clouds`).
     """
 
     name: str
@@ -64,6 +71,7 @@ class PointCloud:
     frame: str = ""
     points: Points = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     dropped: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     def bbox(self) -> BBox | None:
         """The box around the points (None without points)."""

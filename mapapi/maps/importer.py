@@ -74,6 +74,7 @@ class ImportResult:
         chunks: table -> chunk, for the tables of one chunk per mission (the
             mission row's, a cloud's blocks).
         tiles: a graph's tiles, each in chunks of its own.
+        warnings: what the reader could not do, one line each (`PointCloud.warnings`).
     """
 
     mission: str
@@ -87,6 +88,7 @@ class ImportResult:
     commit_seconds: float = 0.0  # of the import's time, what the commit itself took
     tiles: tuple[TileChunks, ...] = ()
     landmarks: int = 0
+    warnings: tuple[str, ...] = ()
 
     def elements(self) -> int:
         """Vertices, landmarks and edges: the unit of the import speed target."""
@@ -222,6 +224,7 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
         written.seconds,
         written.tiles,
         landmarks,
+        tuple(source.warnings) if isinstance(source, PointCloud) else (),
     )
 
 

@@ -26,7 +26,7 @@ from mapapi.maps.frames import MISSION, frame_reads, graph_in
 from mapapi.maps.g2o import looks_planar, write_g2o
 from mapapi.maps.graph import MissionGraph
 from mapapi.maps.labels import map_labels
-from mapapi.maps.schema import CLOUDS
+from mapapi.maps.schema import CLOUDS, GRIDS
 from mapapi.maps.stored import CLOUD_READ, cloud_at, graph_at
 from mapapi.maps.trajectory import TRAJECTORY_FORMATS, trajectory_of, write_kitti, write_tum
 from mapapi.service.peer import Peer
@@ -83,8 +83,8 @@ def export_reads(fmt: str, frame: str = MISSION) -> tuple[str, ...]:
     Raises:
         UsageError: an unknown frame, or a cloud in the world frame.
     """
-    if fmt == BAG:  # poses and points alike
-        return (*frame_reads(frame), CLOUDS)
+    if fmt == BAG:  # poses, points and grids alike
+        return (*frame_reads(frame), CLOUDS, GRIDS)
     if fmt not in CLOUD_FORMATS:
         return frame_reads(frame)
     if frame != MISSION:
@@ -97,7 +97,7 @@ def export_mission(
 ) -> dict[str, Any]:
     """Write `mission` as of `time` to `target` in `fmt` (`export_format`): a
     graph as g2o (2D when it is planar), its poses as a TUM or KITTI trajectory
-    (`mapapi.maps.trajectory`), a cloud as PLY or PCD, poses and points as a
+    (`mapapi.maps.trajectory`), a cloud as PLY or PCD, poses, points and grid as a
     ROS 2 bag (`mapapi.maps.bag_export`); what was written. A graph's poses are
     in `frame` (`frames.graph_in`).
 

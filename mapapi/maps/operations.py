@@ -72,6 +72,7 @@ def import_json(result: ImportResult) -> Json:
         "chunks": dict(result.chunks),
         "tiles": [tile_json(t) for t in result.tiles],
         "commit": result.commit,
+        "warnings": list(result.warnings),
     }
 
 

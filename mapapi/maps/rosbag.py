@@ -11,20 +11,26 @@ What becomes what (`read_bag`):
   every edge gets `INFORMATION`). A path topic republishes the whole path as it
   grows: its last message is the trajectory;
 - each `sensor_msgs/PointCloud2` topic is one point cloud mission of every point of
-  its messages, as they give them, in their header's frame (no TF is applied: a
-  cloud in a sensor's frame stacks its scans at the sensor); points with a
-  coordinate that is not finite are left out;
-- `/tf` and `/tf_static` name frames: a mission's frame is `<mission>/<frame_id>`
-  of its messages' header, or, when that is empty, the TF parent of an odometry's
-  `child_frame_id`. The TF tree itself is not stored;
+  its messages; points with a coordinate that is not finite are left out. A
+  message in another frame than the trajectory's (the frame of the first
+  odometry topic read, else of the first pose topic) is moved there through TF
+  at its stamp (`mapapi.maps.bag_clouds`), so clouds and poses line up; where
+  TF joins no path, the points stay in their header's frame and the mission
+  says so in its `warnings`;
+- `/tf` and `/tf_static` (any topic ending so, for a robot's namespace) make
+  the TF tree (`mapapi.maps.tf_tree`; a `tf_static` transform holds at every
+  time), which places the clouds and names frames: a mission's frame is
+  `<mission>/<frame_id>` of its messages' header, or, when that is empty, the
+  TF parent of an odometry's `child_frame_id`. The tree itself is not stored;
 - each `nav_msgs/OccupancyGrid` topic is one grid mission (`mapapi.maps.occupancy`)
   of its **last** message (a map is republished whole as it grows), in its
   header's frame. Only a grid whose origin is not rotated is read: a rotated one
   is refused, naming the topic (rotating its cells would resample them).
   Other types are skipped.
 
-Messages are read one at a time (a bag never sits in memory); errors name the
-topic and the message's index on it. `rosbags` is imported when a bag is read,
+Messages are read one at a time, in one pass (a bag never sits in memory; a
+cloud's scans wait, as read, for the end of the bag, when TF is complete);
+errors name the topic and the message's index on it. `rosbags` is imported when a bag is read,
 so a command that never reads one does not load it.
 """
 
@@ -37,15 +43,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from mapapi.core.errors import UsageError
 from mapapi.maps import bag_messages as msgs
-from mapapi.maps.cloud import PointCloud, Points
+from mapapi.maps.bag_clouds import BagCloud
+from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import EdgeKind, GraphEdge, MissionGraph
 from mapapi.maps.occupancy import OccupancyGrid
 from mapapi.maps.se3 import Pose, compose, inverse, isotropic_information
+from mapapi.maps.tf_tree import TfTree
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +89,7 @@ class _Trajectory:
     graph: MissionGraph
     frame: str = ""  # the header's frame id of its first pose
     child: str = ""  # an odometry's child_frame_id
+    odometry: bool = False  # a nav_msgs/Odometry topic: its frame is where clouds go
     last: Pose | None = None
 
     def add(self, stamp: float, pose: Pose, frame: str) -> None:
@@ -106,37 +113,26 @@ class _Trajectory:
 
 
 @dataclass
-class _Cloud:
-    """One point cloud topic's points as they are read."""
-
-    name: str
-    frame: str = ""
-    parts: list[Points] = field(default_factory=list)
-    dropped: int = 0
-
-
-@dataclass
 class _Bag:
-    """What is read of a bag: the missions per topic, and the TF parents seen."""
+    """What is read of a bag: the missions per topic, and the TF tree."""
 
     prefix: str
     robot: str
     trajectories: dict[str, _Trajectory] = field(default_factory=dict)
-    clouds: dict[str, _Cloud] = field(default_factory=dict)
-    parents: dict[str, str] = field(default_factory=dict)
+    clouds: dict[str, BagCloud] = field(default_factory=dict)
+    tf: TfTree = field(default_factory=TfTree)
     grids: dict[str, OccupancyGrid] = field(default_factory=dict)
 
     def read(self, topic: str, msgtype: str, message: Any, received: float) -> None:
         if msgtype in msgs.TF_TYPES:
-            self.parents.update(msgs.tf_parents(message))
+            static = topic.endswith("tf_static")
+            for parent, child, stamp, pose in msgs.tf_links(message):
+                self.tf.add(parent, child, stamp or received, pose, static=static)
         elif msgtype == msgs.OCCUPANCY_GRID:
             self.read_grid(topic, message, received)
         elif msgtype == msgs.POINT_CLOUD:
-            cloud = self.clouds.setdefault(topic, _Cloud(mission_name(self.prefix, topic)))
-            points, dropped = msgs.cloud_points(message)
-            cloud.frame = cloud.frame or msgs.frame_name(message.header.frame_id)
-            cloud.parts.append(points)
-            cloud.dropped += dropped
+            name = mission_name(self.prefix, topic)
+            self.clouds.setdefault(topic, BagCloud(topic, name)).add(message, received)
         else:
             track = self.trajectories.get(topic)
             if track is None:
@@ -146,6 +142,7 @@ class _Bag:
                 track.restart()
             elif msgtype == msgs.ODOMETRY:
                 track.child = track.child or msgs.frame_name(message.child_frame_id)
+                track.odometry = True
             for stamp, pose, frame in msgs.stamped_poses(msgtype, message, received):
                 track.add(stamp, pose, frame)
 
@@ -161,29 +158,43 @@ class _Bag:
     def missions(self, voxel: float) -> list[MapSource]:
         """The missions read, trajectories first, each in its frame."""
         found: list[MapSource] = []
+        frames = {}  # topic -> its trajectory's frame, without the mission's name
         for topic, track in self.trajectories.items():
             if not track.graph.vertices:
                 log.warning("topic %s holds no pose: no mission", topic)
                 continue
-            frame = track.frame or self.parents.get(track.child, "") or "odom"
+            frame = frames[topic] = track.frame or self.tf.parent(track.child) or "odom"
             track.graph.frame = f"{track.graph.name}/{frame}"
             found.append(track.graph)
-        for topic, cloud in self.clouds.items():
-            points = np.concatenate(cloud.parts) if cloud.parts else np.zeros((0, 3), np.float32)
-            if voxel:
-                from mapapi.maps.cloud_file import downsample  # open3d, only when asked
-
-                points = downsample(points, voxel)
-            if not len(points):
-                log.warning("topic %s holds no finite point: no mission", topic)
-                continue
-            frame = f"{cloud.name}/{cloud.frame or 'map'}"
-            found.append(PointCloud(cloud.name, self.robot, frame, points, cloud.dropped))
+        odometry = [t for t in frames if self.trajectories[t].odometry]
+        target = frames[(odometry or list(frames))[0]] if frames else None
+        for cloud in self.clouds.values():
+            if (placed := self.cloud(cloud, target, voxel)) is not None:
+                found.append(placed)
         for topic, grid in self.grids.items():
             if not grid.cells.size:
                 log.warning("topic %s holds an empty grid: no mission", topic)
                 continue
             found.append(grid)
+        return found
+
+    def cloud(self, cloud: BagCloud, target: str | None, voxel: float) -> PointCloud | None:
+        """A cloud topic's mission, placed in frame `target` (None: no mission,
+        since no point is left)."""
+        placed = cloud.placed(self.tf, target)
+        for warning in placed.warnings:
+            log.warning("%s", warning)
+        points = placed.points
+        if voxel:
+            from mapapi.maps.cloud_file import downsample  # open3d, only when asked
+
+            points = downsample(points, voxel)
+        if not len(points):
+            log.warning("topic %s holds no finite point: no mission", cloud.topic)
+            return None
+        frame = f"{cloud.name}/{placed.frame or 'map'}"
+        found = PointCloud(cloud.name, self.robot, frame, points, cloud.dropped)
+        found.warnings.extend(placed.warnings)
         return found
 
 

@@ -84,7 +84,8 @@ def import_map(
     """Import a map FILE: g2o pose graph (one mission per robot when its ids are
     GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
     cloud, CARMEN laser log (.clf, .clf.bz2), ROS bag (.bag, or a ROS 2 bag's
-    folder: one mission per pose or point cloud topic).
+    folder: one mission per pose, point cloud or occupancy grid topic; clouds
+    placed through /tf in the odometry's frame).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
@@ -113,6 +114,9 @@ def import_map(
     render.table(title, ["name", "robot", "size", "bbox", "commit"], rows)
     rate = f" ({info['elements_per_s']:,} elements/s)" if info["elements"] else ""
     render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
+    for m in info["missions"]:
+        for warning in m["warnings"]:
+            render.warning(f"{m['name']}: {warning}")
 
 
 def frame_option(what: str, where: str = "in each mission's own frame, or in") -> Any:
@@ -154,7 +158,7 @@ def export_map(
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
     its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD),
-    poses, path and points as a ROS 2 bag (MCAP)."""
+    poses, path, points and grid as a ROS 2 bag (MCAP)."""
     from mapctl import render
 
     info = session.call(
@@ -164,7 +168,10 @@ def export_map(
         render.emit_json(info)
         return
     if info["format"] == "bag":
-        what = f"{info['poses']} poses, {info['points']} points on {', '.join(info['topics'])}"
+        grid = f", a grid of {info['cells']:,} cells" if info["cells"] else ""
+        what = (
+            f"{info['poses']} poses, {info['points']} points{grid} on {', '.join(info['topics'])}"
+        )
     elif info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
         if info.get("landmarks"):

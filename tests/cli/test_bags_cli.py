@@ -12,6 +12,7 @@ import pytest
 
 from mapbench.bags import GRID_ORIGIN, STORAGES, room_cells, write_bag
 from tests.cli.conftest import Mapctl
+from tests.unit.test_maps_rosbag import tf_bag
 
 pytest.importorskip("rosbags")
 
@@ -87,6 +88,38 @@ class TestImport:
         assert mapctl.json("log") == []
 
 
+class TestTf:
+    def test_a_lidar_cloud_is_placed_where_the_odometry_cloud_is(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        sensor = write_bag(tmp_path / "sensor", "mcap", poses=40, lidar=True)
+        plain = write_bag(tmp_path / "plain", "mcap", poses=40)
+        boxes = {}
+        for bag in (sensor, plain):
+            info = mapctl.json("import", str(bag), "--topics", "/odom,/points")
+            clouds = [m for m in info["missions"] if m["points"]]
+            assert [m["warnings"] for m in info["missions"]] == [[], []]
+            boxes[bag.name] = clouds[0]["bbox"]
+        assert boxes["sensor"] == pytest.approx(boxes["plain"], abs=1e-4)
+
+    def test_a_cloud_tf_cannot_place_is_kept_and_reported(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        moves = [(1, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        bag = tf_bag(tmp_path / "lost", moves, [(1, "camera", points)], mount=None)
+        info = mapctl.json("import", str(bag))
+        warnings = {m["name"]: m["warnings"] for m in info["missions"]}
+        assert warnings["lost-odom"] == []
+        (warning,) = warnings["lost-points"]
+        assert warning.startswith("topic /points: no TF path from camera to odom")
+        outcome = mapctl.main("import", str(bag), "--mission", "again-")
+        assert outcome.code == 0
+        assert outcome.err_lines[-1].startswith(
+            "again-points: topic /points: no TF path from camera to odom"
+        )
+
+
 def read_pgm(path: Path) -> np.ndarray:
     """A binary PGM's pixels (rows x columns), row 0 the top."""
     data = path.read_bytes()
@@ -151,6 +184,7 @@ class TestExport:
             "frame": "mission",
             "poses": 30,
             "points": 0,
+            "cells": 0,
             "time": "timestamp",
             "topics": ["/run_odom/pose", "/run_odom/path"],
         }
@@ -169,6 +203,29 @@ class TestExport:
             assert in_path.pose.position.x == p.x
         again = mapctl.json("import", str(out), "--mission", "back-")
         assert [m["vertices"] for m in again["missions"]] == [30, 30]
+
+    def test_a_grid_round_trips_through_a_bag(self, mapctl: Mapctl, tmp_path: Path) -> None:
+        mapctl("import", str(write_bag(tmp_path / "run", "mcap", poses=5, grid=True)))
+        out = tmp_path / "out"
+        info = mapctl.json("export", "run-map", "-o", str(out), "--format", "bag")
+        cells = room_cells()  # 300 x 200: two tiles wide
+        assert (info["cells"], info["poses"], info["topics"]) == (cells.size, 0, ["/run_map/map"])
+        ((ns, grid),) = read_back(out)["/run_map/map"]
+        assert grid.header.frame_id == "run-map/map"
+        assert ns == 1_700_000_000_400_000_000  # the stored grid's stamp, as recorded
+        assert (grid.header.stamp.sec, grid.header.stamp.nanosec) == (1_700_000_000, 400_000_000)
+        assert (grid.info.width, grid.info.height) == (300, 200)
+        assert grid.info.resolution == np.float32(0.05)
+        origin = grid.info.origin
+        assert (origin.position.x, origin.position.y, origin.position.z) == GRID_ORIGIN[:3]
+        assert (origin.orientation.z, origin.orientation.w) == (0.0, 1.0)
+        assert np.array_equal(np.asarray(grid.data).reshape(200, 300), cells)
+        again = mapctl.json("import", str(out), "--mission", "back-")
+        (mission,) = again["missions"]
+        assert (mission["name"], mission["bbox"]) == ("back-run_map-map", [-7.5, -5, 0, 7.5, 5, 0])
+        mapctl("grid", "-o", str(tmp_path / "a.yaml"), "-m", "run-map")
+        mapctl("grid", "-o", str(tmp_path / "b.yaml"), "-m", "back-run_map-map")
+        assert (tmp_path / "a.pgm").read_bytes() == (tmp_path / "b.pgm").read_bytes()
 
     def test_laser_scans_become_clouds_stamped_by_their_pose(
         self, mapctl: Mapctl, tmp_path: Path

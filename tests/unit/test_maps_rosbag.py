@@ -19,7 +19,7 @@ from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import EdgeKind, MissionGraph
 from mapapi.maps.occupancy import OccupancyGrid
 from mapapi.maps.rosbag import INFORMATION, MapSource, read_bag
-from mapapi.maps.se3 import compose, inverse
+from mapapi.maps.se3 import Pose, compose, inverse
 from mapapi.maps.source import detect_format, read_source
 from mapbench.bags import (
     GRID_ORIGIN,
@@ -132,6 +132,110 @@ class TestChoices:
             read_bag(path, ["/tf_static"])
         with pytest.raises(UsageError, match="ROS bags only"):
             read_source(tmp_path / "run" / "metadata.yaml", "g2o", topics=["/odom"])
+
+
+def tf_bag(
+    path: Path,
+    moves: list[tuple[int, Pose]],
+    scans: list[tuple[int, str, np.ndarray]],
+    mount: Pose | None = (0.5, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0),
+) -> Path:
+    """An MCAP bag of odometry in `odom` and odom -> base_link on /tf at each of
+    `moves` (ns, pose), base_link -> lidar at `mount` on /tf_static (none if None),
+    and a PointCloud2 on /points per scan (ns, frame, points)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    build = Messages(store, ros1=False)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+
+        def put(topic: str, msgtype: str, ns: int, message: object) -> None:
+            if topic not in topics:
+                topics[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            writer.write(topics[topic], ns, store.serialize_cdr(message, msgtype))
+
+        topics: dict[str, object] = {}
+        tf = "tf2_msgs/msg/TFMessage"
+        if mount is not None:
+            put("/tf_static", tf, 0, build.tf(0, "base_link", "lidar", mount))
+        for ns, pose in moves:
+            put("/tf", tf, ns, build.tf(ns, "odom", "base_link", pose))
+            put("/odom", "nav_msgs/msg/Odometry", ns, build.odometry(ns, pose))
+        for ns, frame, points in scans:
+            put("/points", "sensor_msgs/msg/PointCloud2", ns, build.cloud(ns, points, frame))
+    return path
+
+
+def turned(x: float, degrees: float) -> Pose:
+    """A pose at (x, 0, 0) turned `degrees` about z."""
+    half = math.radians(degrees) / 2
+    return (x, 0.0, 0.0, 0.0, 0.0, math.sin(half), math.cos(half))
+
+
+class TestTfPlacesClouds:
+    @pytest.mark.parametrize("storage", STORAGES)
+    def test_a_lidar_frame_cloud_lands_on_the_odometry(self, tmp_path: Path, storage: str) -> None:
+        path = bag_at(tmp_path, storage, poses=25, cloud_every=10, cloud_points=16, lidar=True)
+        found = by_name(read_bag(path))
+        cloud = found["run-points"]
+        assert isinstance(cloud, PointCloud)
+        assert (cloud.frame, found["run-odom"].frame) == ("run-points/odom", "run-odom/odom")
+        want = np.concatenate([ring(helix_pose(i), 16) for i in (0, 10, 20)])
+        assert np.abs(cloud.points - want).max() < 1e-4  # float32 in the lidar frame
+        assert cloud.warnings == []
+
+    def test_a_scan_between_two_transforms_is_interpolated(self, tmp_path: Path) -> None:
+        moves = [(1_000_000_000, turned(0.0, 0.0)), (2_000_000_000, turned(2.0, 90.0))]
+        points = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], np.float32)
+        path = tf_bag(tmp_path / "mid", moves, [(1_500_000_000, "lidar", points)])
+        cloud = by_name(read_bag(path))["mid-points"]
+        assert isinstance(cloud, PointCloud)
+        # at t 1.5 s base_link is at x 1, turned 45 degrees; the lidar 0.5 m ahead, 0.3 up
+        c = math.cos(math.radians(45))
+        want = [[1 + 1.5 * c, 1.5 * c, 0.3], [1 + 0.5 * c, 0.5 * c, 1.3]]
+        assert cloud.points == pytest.approx(np.array(want), abs=1e-6)
+        assert cloud.frame == "mid-points/odom"
+
+    def test_without_a_tf_path_the_points_stay_and_a_warning_says_so(self, tmp_path: Path) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        moves = [(1, turned(0.0, 0.0)), (2, turned(1.0, 0.0))]
+        path = tf_bag(tmp_path / "lost", moves, [(1, "camera", points)], mount=None)
+        cloud = by_name(read_bag(path))["lost-points"]
+        assert isinstance(cloud, PointCloud)
+        assert cloud.frame == "lost-points/camera"
+        assert np.array_equal(cloud.points, points)
+        assert cloud.warnings == [
+            "topic /points: no TF path from camera to odom: camera is in the tree of camera, "
+            "odom in that of odom; its points stay in camera, as its messages give them"
+        ]
+
+    def test_a_cloud_that_names_no_frame_stays_and_says_so(self, tmp_path: Path) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        path = tf_bag(tmp_path / "bare", [(1, turned(0.0, 0.0))], [(1, "", points)])
+        cloud = by_name(read_bag(path))["bare-points"]
+        assert isinstance(cloud, PointCloud)
+        assert (cloud.frame, cloud.warnings) == (
+            "bare-points/map",
+            [
+                "topic /points: a message names no frame; its points stay in no frame, "
+                "as its messages give them"
+            ],
+        )
+        assert np.array_equal(cloud.points, points)
+
+    def test_scans_stamped_outside_the_tf_are_left_out_and_counted(self, tmp_path: Path) -> None:
+        moves = [(10**9 * k, turned(float(k), 0.0)) for k in (1, 2)]
+        ring_points = ring(helix_pose(0), 4).astype(np.float32)
+        scans = [(10**9 * k // 2, "lidar", ring_points) for k in (1, 3, 5)]  # 0.5, 1.5, 2.5 s
+        cloud = by_name(read_bag(tf_bag(tmp_path / "late", moves, scans)))["late-points"]
+        assert isinstance(cloud, PointCloud)
+        assert len(cloud.points) == 4  # the scan at 1.5 s
+        (warning,) = cloud.warnings
+        assert warning.startswith(
+            "topic /points: 2 of 3 scans left out, TF cannot place them in odom at their "
+            "time (TF odom -> base_link is known from 1.000 to 2.000 s, not at 0.500 s"
+        )
 
 
 @pytest.mark.parametrize("storage", STORAGES)
