@@ -30,7 +30,7 @@ from mapapi.lookup.spatial import BBox
 from mapapi.maps.cloud import PointCloud
 from mapapi.maps.errors import MapImportError
 from mapapi.maps.graph import GraphEdge, MissionGraph
-from mapapi.maps.laser import LaserMission, scan_blocks
+from mapapi.maps.laser import Correction, LaserMission, scan_blocks
 from mapapi.maps.occupancy import OccupancyGrid, grid_tiles
 from mapapi.maps.rows import build_cloud_rows, check_graph, edge_rows, landmark_rows, vertex_rows
 from mapapi.maps.schema import (
@@ -75,6 +75,7 @@ class ImportResult:
             mission row's, a cloud's blocks).
         tiles: a graph's tiles, each in chunks of its own.
         warnings: what the reader could not do, one line each (`PointCloud.warnings`).
+        correction: how scan matching moved a laser mission's poses.
     """
 
     mission: str
@@ -89,6 +90,7 @@ class ImportResult:
     tiles: tuple[TileChunks, ...] = ()
     landmarks: int = 0
     warnings: tuple[str, ...] = ()
+    correction: Correction | None = None
 
     def elements(self) -> int:
         """Vertices, landmarks and edges: the unit of the import speed target."""
@@ -225,6 +227,7 @@ async def _import(peer: Peer, prepared: _Prepared, progress: Progress | None) ->
         written.tiles,
         landmarks,
         tuple(source.warnings) if isinstance(source, PointCloud) else (),
+        source.correction if isinstance(source, LaserMission) else None,
     )
 
 

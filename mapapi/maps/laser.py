@@ -50,6 +50,19 @@ def project_scan(
     return points
 
 
+@dataclass(frozen=True)
+class Correction:
+    """How scan matching (`mapapi.maps.scan_match`) corrected a laser mission.
+
+    Attributes:
+        keyframes: the scans matched to the map of those before them.
+        largest: metres between a corrected pose and its odometry, at most.
+    """
+
+    keyframes: int
+    largest: float
+
+
 @dataclass(slots=True)
 class LaserMission(MissionGraph):
     """A pose graph whose vertices took laser scans (see the module docstring):
@@ -58,9 +71,11 @@ class LaserMission(MissionGraph):
     Attributes:
         scans: vertex index -> the points its scan gave, in the mission's frame
             (no entry for a pose without scan, or a scan without a return).
+        correction: how scan matching moved its poses (None: as the log gave them).
     """
 
     scans: dict[int, Points] = field(default_factory=dict)
+    correction: Correction | None = None
 
     def point_count(self) -> int:
         """How many scan points it holds."""

@@ -1,4 +1,5 @@
-"""The map operations of `mapctl` (import, export, missions, plot, loading by box),
+"""The map operations of `mapctl` (export, missions, plot, loading by box; import
+is `import_ops`'s),
 JSON in and out.
 
 `MapOperations` is one of the operation sets of `mapapi.service.ops.Operations`
@@ -26,9 +27,7 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import time
 from collections.abc import Callable, Mapping
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -40,7 +39,6 @@ from mapapi.service.ops import Operation
 from mapapi.service.transfer_ops import online, placed_json
 
 if TYPE_CHECKING:
-    from mapapi.maps.importer import ImportResult
     from mapapi.maps.stored import MissionInfo
     from mapapi.maps.tiles import TileChunks
     from mapapi.net.messages import Member
@@ -55,31 +53,15 @@ JOIN_ATTEMPTS = 3
 """Times `load_bbox` asks for a chunk whose state is late (each waits `PROPOSE_TIMEOUT`)."""
 
 
-def _box(box: BBox | None) -> list[float] | None:
+def box_json(box: BBox | None) -> list[float] | None:
+    """A box as JSON: its six numbers, or null."""
     return None if box is None else list(box.as_tuple())
-
-
-def import_json(result: ImportResult) -> Json:
-    """One imported mission."""
-    return {
-        "name": result.mission,
-        "robot": result.robot,
-        "vertices": result.vertices,
-        "edges": result.edges,
-        "landmarks": result.landmarks,
-        "points": result.points,
-        "bbox": _box(result.bbox),
-        "chunks": dict(result.chunks),
-        "tiles": [tile_json(t) for t in result.tiles],
-        "commit": result.commit,
-        "warnings": list(result.warnings),
-    }
 
 
 def tile_json(tile: TileChunks) -> Json:
     """One spatial tile of a mission: its box, chunks and counts."""
     return {
-        "bbox": _box(tile.bbox),
+        "bbox": box_json(tile.bbox),
         "vertices": tile.vertices,
         "edges": tile.edges,
         "vertex_count": tile.vertex_count,
@@ -100,67 +82,22 @@ class MapOperations:
     """Map operations over one peer (see the module docstring)."""
 
     def __init__(self, peer: Peer) -> None:
+        from mapapi.maps.import_ops import ImportOperations
+
         self.peer = peer
-        self._imports: dict[str, tuple[int, int]] = {}  # path -> (done, total) of an import
+        self.imports = ImportOperations(peer)
         self._loads: dict[str, tuple[int, int]] = {}  # load key -> (loaded, to load so far)
 
     def operations(self) -> Mapping[str, Operation]:
         """See `mapapi.service.ops.OperationSet`."""
         return {
-            "import_map": self.import_map,
-            "import_progress": self.import_progress,
+            **self.imports.operations(),
             "export_map": self.export_map,
             "missions": self.missions,
             "plot_map": self.plot_map,
             "load_bbox": self.load_bbox,
             "load_progress": self.load_progress,
         }
-
-    async def import_map(
-        self,
-        path: str,
-        fmt: str | None = None,
-        mission: str | None = None,
-        robot: str | None = None,
-        voxel: float | None = None,
-        topics: list[str] | None = None,
-    ) -> Json:
-        """Import a map file or Kimera folder: parse it all, then one commit per
-        mission; a malformed file commits nothing (the error names the line)."""
-        from mapapi.maps.importer import import_missions
-        from mapapi.maps.source import detect_format, read_source
-
-        source = _absolute(path)
-        fmt = fmt or detect_format(source)
-
-        def report(done: int, total: int) -> None:
-            self._imports[path] = (done, total)
-
-        started = time.perf_counter()
-        self._imports[path] = (0, 0)
-        try:
-            read = partial(read_source, source, fmt, mission=mission, robot=robot, voxel=voxel)
-            sources = await asyncio.to_thread(read, topics=topics or (), progress=report)
-            results = await import_missions(self.peer, sources, report)
-        finally:
-            self._imports.pop(path, None)
-        seconds = time.perf_counter() - started
-        elements = sum(r.elements() for r in results)
-        return {
-            "path": str(source),
-            "format": fmt,
-            "missions": [import_json(r) for r in results],
-            "elements": elements,
-            "points": sum(r.points for r in results),
-            "seconds": round(seconds, 4),
-            "elements_per_s": round(elements / seconds) if seconds > 0 else None,
-        }
-
-    async def import_progress(self, path: str) -> Json:
-        """How far a running `import_map(path)` got: (done, total) of its current
-        phase, total 0 while unknown (0 of 0 when none runs)."""
-        done, total = self._imports.get(path, (0, 0))
-        return {"path": path, "done": done, "total": total}
 
     async def export_map(
         self, mission: str, path: str, fmt: str | None = None, frame: str = "mission"
@@ -172,7 +109,7 @@ class MapOperations:
         from mapapi.maps.jobs import export_format, export_mission, export_reads
         from mapapi.maps.stored import read_time
 
-        target = _absolute(path)
+        target = absolute(path)
         fmt = export_format(target, fmt)
         async with read_time(self.peer, [mission], export_reads(fmt, frame)) as at:
             counts = await self._job(export_mission, at, mission, target, fmt, frame)
@@ -197,7 +134,7 @@ class MapOperations:
                 box = (
                     None if place is None or info.bbox is None else world_box(info.bbox, place.pose)
                 )
-                row.update(frame=frame, aligned=place is not None, bbox=_box(box))
+                row.update(frame=frame, aligned=place is not None, bbox=box_json(box))
         if swarm:
             names = {info.name for info in held}
             for found in await peer.query_bbox(peer.grid.bounds, MISSIONS):
@@ -217,7 +154,7 @@ class MapOperations:
             "edges": info.edges,
             "landmarks": info.landmarks,
             "points": info.points,
-            "bbox": _box(info.bbox),
+            "bbox": box_json(info.bbox),
             "chunks": dict(info.chunks),
             "tiles": [tile_json(t) for t in info.tiles],
             "holders": [self._holder(p) for p in info.holders],
@@ -264,7 +201,7 @@ class MapOperations:
         chosen = [
             (i.name, i.kind) for i in choose_missions(await list_missions(self.peer), missions, box)
         ]
-        target = _absolute(path)
+        target = absolute(path)
         reads = (*frame_reads(frame), CLOUDS)
         async with read_time(self.peer, [name for name, _ in chosen], reads) as at:
             drawn = await self._job(
@@ -275,7 +212,7 @@ class MapOperations:
             "renderer": drawn.renderer,
             "up": drawn.up,
             "missions": drawn.missions,
-            "bbox": _box(box),
+            "bbox": box_json(box),
             "frame": frame,
         }
 
@@ -376,7 +313,7 @@ class MapOperations:
         return {"loaded": done, "of": total}
 
 
-def _absolute(path: str) -> Path:
+def absolute(path: str) -> Path:
     """`path` from the caller's folder (the CLI sends absolute paths)."""
     return Path(os.path.abspath(os.path.expanduser(path)))
 
@@ -390,7 +327,7 @@ def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:
         "edges": None,
         "landmarks": None,
         "points": None,
-        "bbox": _box(box),
+        "bbox": box_json(box),
         "chunks": {},
         "tiles": [],
         "holders": holders,

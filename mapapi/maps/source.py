@@ -69,6 +69,7 @@ def read_source(
     robot: str | None = None,
     voxel: float | None = None,
     topics: Sequence[str] = (),
+    scan_match: bool = False,
     progress: Progress | None = None,
 ) -> list[MapSource]:
     """Read a map file (or Kimera folder) as the missions it holds.
@@ -81,6 +82,8 @@ def read_source(
         voxel: point clouds only: the voxel side in metres (0 keeps every
             point; default `DEFAULT_VOXEL`, and for a bag's clouds 0).
         topics: ROS bags only: the topics to read (default: every supported one).
+        scan_match: laser logs only: correct the odometry by the scans
+            (`mapapi.maps.scan_match`).
         progress: called with (units read, units in all or 0 while unknown).
 
     Raises:
@@ -97,6 +100,8 @@ def read_source(
         return read_bag(path, topics, mission, robot or "", voxel=voxel or 0.0, progress=progress)
     if topics:
         raise UsageError("--topics applies to ROS bags only")
+    if scan_match and fmt != "carmen":
+        raise UsageError("--scan-match applies to laser logs (carmen) only")
     if fmt in CLOUD_FORMATS:
         cloud = read_cloud(
             path,
@@ -112,7 +117,12 @@ def read_source(
     if fmt == "g2o":
         return list(read_g2o_source(path, mission, robot, progress))
     if fmt == "carmen":
-        return [read_carmen(path, mission, robot or "", progress=progress)]
+        laser = read_carmen(path, mission, robot or "", progress=progress)
+        if scan_match:
+            from mapapi.maps.scan_match import match_mission
+
+            match_mission(laser, progress)
+        return [laser]
     if fmt == gtsam_text.FORMAT:
         parse = gtsam_text.parse_gtsam_landmarks
         return [read_text(parse, path, mission, robot or "", progress)]

@@ -69,6 +69,12 @@ def _holders_text(holders: list[dict[str, Any]]) -> str:
     help="ROS bags: read these topics only (repeat, or separate with commas; default: every "
     "pose, path, odometry and point cloud topic).",
 )
+@click.option(
+    "--scan-match",
+    is_flag=True,
+    help="Laser logs: correct the odometry by matching each scan to those before it, so "
+    "walls stay where they are (the Intel log: about 40 s).",
+)
 @json_option
 @pass_session
 def import_map(
@@ -79,6 +85,7 @@ def import_map(
     robot: str | None,
     voxel: float | None,
     topics: tuple[str, ...],
+    scan_match: bool,
     as_json: bool,
 ) -> None:
     """Import a map FILE: g2o pose graph (one mission per robot when its ids are
@@ -95,7 +102,7 @@ def import_map(
     path = str(file.resolve())
     chosen = [t for text in topics for t in text.split(",") if t]
     args: dict[str, Any] = {"path": path, "fmt": fmt, "mission": mission, "robot": robot}
-    args |= {"voxel": voxel, "topics": chosen or None}
+    args |= {"voxel": voxel, "topics": chosen or None, "scan_match": scan_match}
     with render.transfer(f"importing {file.name}") as show:
         info = session.call_with_progress(
             "import_map",
@@ -115,6 +122,12 @@ def import_map(
     rate = f" ({info['elements_per_s']:,} elements/s)" if info["elements"] else ""
     render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
     for m in info["missions"]:
+        if m.get("scan_match"):
+            matched = m["scan_match"]
+            render.line(
+                f"{m['name']}: {matched['keyframes']:,} scans matched; the odometry had drifted "
+                f"up to {matched['largest']:.2f} m"
+            )
         for warning in m["warnings"]:
             render.warning(f"{m['name']}: {warning}")
 

@@ -75,6 +75,26 @@ class TestImport:
         assert outcome.code == EXIT_USAGE
         assert f"{broken}:2: FLASER: could not convert string to float: 'x'" in outcome.err
 
+    def test_a_scan_matched_log_gives_a_grid_without_the_odometrys_smear(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        mapctl("import", str(LOG), "--mission", "raw")
+        matched = mapctl.json("import", str(LOG), "--mission", "matched", "--scan-match")
+        (mission,) = matched["missions"]
+        assert mission["scan_match"]["keyframes"] > 100
+        assert mission["scan_match"]["largest"] > 5.0  # the head's odometry drifts that far
+
+        raw = mapctl.json("grid", "-m", "raw", "-o", str(tmp_path / "raw.yaml"))
+        fixed = mapctl.json("grid", "-m", "matched", "-o", str(tmp_path / "matched.yaml"))
+
+        # The same rays, cast from poses that keep the walls in place, sweep far
+        # less floor: the smear of drifting rays over the rooms is gone.
+        assert fixed["cells"]["free"] < 0.7 * raw["cells"]["free"]
+        assert "scans matched" in mapctl("import", str(LOG), "--mission", "again", "--scan-match")
+        refused = mapctl.main("import", str(INTEL), "--scan-match")
+        assert refused.code == EXIT_USAGE
+        assert "--scan-match applies to laser logs" in refused.err
+
     def test_a_point_cloud_with_and_without_downsampling(self, mapctl: Mapctl) -> None:
         full = mapctl.json("import", str(ROOM), "--voxel", "0", "--mission", "full")
         thin = mapctl.json("import", str(ROOM), "--robot", "pcl")

@@ -175,7 +175,7 @@ async def test_a_mission_exports_the_same_bytes_on_another_peer(
     """Issue 15: the same mission gives the same bytes on any peer, in the
     order and number formatting of the file it was imported from."""
     a, b = await lookup_swarm(make_peer, 2)
-    await MapOperations(a).import_map(str(INTEL))
+    await MapOperations(a).imports.import_map(str(INTEL))
     loaded = await MapOperations(b).load_bbox([-100, -100, -10, 100, 100, 10])
     assert loaded["loaded"]
 

@@ -99,7 +99,7 @@ class TestPlainAndMixed:
 async def test_the_set_imports_into_a_repository(make_peer) -> None:  # type: ignore[no-untyped-def]
     peer: Peer = await make_peer()
     ops = MapOperations(peer)
-    info = await ops.import_map(str(DGS), mission="blocks-")
+    info = await ops.imports.import_map(str(DGS), mission="blocks-")
     assert [m["name"] for m in info["missions"]] == [f"blocks-{c}" for c in "abcd"]
     assert info["elements"] == 64 + 144
 

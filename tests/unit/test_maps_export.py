@@ -91,7 +91,7 @@ class TestG2oRoundTrip:
     async def test_intel_exports_as_2d_and_reads_back_equal_to_rounding(
         self, ops: MapOperations, tmp_path: Path
     ) -> None:
-        await ops.import_map(str(INTEL))
+        await ops.imports.import_map(str(INTEL))
         out = tmp_path / "intel.g2o"
 
         info = await ops.export_map("intel", str(out))
@@ -112,9 +112,9 @@ class TestG2oRoundTrip:
     async def test_a_3d_graph_comes_back_bit_for_bit(
         self, ops: MapOperations, tmp_path: Path
     ) -> None:
-        await ops.import_map(str(GARAGE))
+        await ops.imports.import_map(str(GARAGE))
         await ops.export_map("parking-garage", str(tmp_path / "garage.g2o"))
-        await ops.import_map(str(tmp_path / "garage.g2o"), mission="again")
+        await ops.imports.import_map(str(tmp_path / "garage.g2o"), mission="again")
 
         first = await load_graph(ops.peer, "parking-garage")
         again = await load_graph(ops.peer, "again")
@@ -132,9 +132,9 @@ class TestG2oRoundTrip:
         with source.open("w") as out:
             write_g2o(graph, out)
 
-        await ops.import_map(str(source))
+        await ops.imports.import_map(str(source))
         await ops.export_map("held-out", str(tmp_path / "exported.g2o"))
-        result = await ops.import_map(str(tmp_path / "exported.g2o"), mission="reimported")
+        result = await ops.imports.import_map(str(tmp_path / "exported.g2o"), mission="reimported")
 
         assert result["missions"][0]["vertices"] == 400
         assert result["missions"][0]["edges"] == 549
@@ -144,7 +144,7 @@ class TestG2oRoundTrip:
     async def test_inter_robot_edges_are_left_out_of_a_one_mission_file(
         self, ops: MapOperations, tmp_path: Path
     ) -> None:
-        await ops.import_map(str(TUNNELS))
+        await ops.imports.import_map(str(TUNNELS))
         robot2 = next(g for g in read_kimera(TUNNELS) if g.name == "robot2")
         inter = robot2.count(EdgeKind.INTER_ROBOT)
 
@@ -155,7 +155,7 @@ class TestG2oRoundTrip:
         assert len(read_g2o(tmp_path / "robot2.g2o").edges) == info["edges"]
 
     async def test_export_errors_say_what_to_do(self, ops: MapOperations, tmp_path: Path) -> None:
-        await ops.import_map(str(INTEL))
+        await ops.imports.import_map(str(INTEL))
         with pytest.raises(MapImportError, match=r"no mission 'nope'.*mapctl missions"):
             await ops.export_map("nope", str(tmp_path / "x.g2o"))
         with pytest.raises(UsageError, match="no point cloud"):
@@ -197,7 +197,7 @@ class TestNothingOfASetHalfImported:
         broken = tmp_path / "broken.g2o"
         broken.write_text("".join(lines))
         with pytest.raises(MapImportError, match=r"broken\.g2o:3001: EDGE_SE2 needs 11"):
-            await ops.import_map(str(broken))
+            await ops.imports.import_map(str(broken))
         assert ops.peer.log() == []
         assert ops.peer.chunks() == []
 
@@ -249,7 +249,7 @@ class TestSources:
         assert staged[0] == (1, rows)
         assert staged[-1] == (rows, rows)
         assert [d for d, _ in staged] == sorted({d for d, _ in staged})
-        assert await ops.import_progress("/no/import") == {
+        assert await ops.imports.import_progress("/no/import") == {
             "path": "/no/import",
             "done": 0,
             "total": 0,

@@ -83,7 +83,7 @@ class TestG2oLandmarks:
     ) -> None:
         source = tmp_path / "small.g2o"
         source.write_text(SMALL)
-        info = await ops.import_map(str(source))
+        info = await ops.imports.import_map(str(source))
         assert info["missions"][0]["landmarks"] == 1
         assert info["elements"] == 6
 
@@ -134,7 +134,7 @@ class TestVictoriaPark:
     async def test_missions_and_the_spatial_index_see_the_landmarks(
         self, ops: MapOperations
     ) -> None:
-        await ops.import_map(str(VICTORIA), mission="vp")
+        await ops.imports.import_map(str(VICTORIA), mission="vp")
         (mission,) = (await ops.missions())["missions"]
         assert (mission["vertices"], mission["edges"], mission["landmarks"]) == (6969, 10608, 151)
         graph = read_text(parse_gtsam_landmarks, VICTORIA)
@@ -149,7 +149,7 @@ class TestVictoriaPark:
         assert [f.ref.chunk for f in found] == [landmarks]
 
     async def test_plot_draws_the_landmarks(self, ops: MapOperations, tmp_path: Path) -> None:
-        await ops.import_map(str(VICTORIA), mission="vp")
+        await ops.imports.import_map(str(VICTORIA), mission="vp")
         drawn = await ops.plot_map(str(tmp_path / "vp.png"))
         assert drawn["missions"] == ["vp"]
         assert (tmp_path / "vp.png").stat().st_size > 10_000

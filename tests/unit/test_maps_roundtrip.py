@@ -89,7 +89,7 @@ def test_every_sample_map_is_covered() -> None:
 async def test_a_g2o_file_exports_byte_for_byte(
     ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
-    await ops.import_map(str(source))
+    await ops.imports.import_map(str(source))
     out = tmp_path / source.name
 
     await ops.export_map(source.stem, str(out))
@@ -110,7 +110,7 @@ async def test_comments_blank_and_fix_lines_give_the_normal_form(
         "# a comment\nVERTEX_SE2 0 0 0 0\n\nFIX 0\nVERTEX_SE2 1 1.50 0 0\n"
         "EDGE_SE2 0 1 1.5 0 0 1 0 0 1 0 1\nVERTEX_SE2 2 3 0 0"  # no final line break
     )
-    await ops.import_map(str(source))
+    await ops.imports.import_map(str(source))
     await ops.export_map("commented", str(tmp_path / "out.g2o"))
     assert (tmp_path / "out.g2o").read_text() == g2o_normal_form(source.read_text())
 
@@ -129,7 +129,7 @@ async def test_an_edited_record_is_written_from_its_values(
         "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1.50 0 0\nVERTEX_SE2 2 1.75 0 0\n"
         "EDGE_SE2 0 1 1.5 0 0 1 0 0 1 0 1\nEDGE_SE2 1 2 0.25 0 0 1 0 0 1 0 1\n"
     )
-    await ops.import_map(str(source))
+    await ops.imports.import_map(str(source))
     tx = ops.peer.begin()
     for index, x in ((1, 2.0), (2, 2.125)):  # 2.125 is not 2.12 or 2.13
         (item,) = await tx.find(VERTICES, "index", index)
@@ -157,7 +157,7 @@ async def test_a_multi_robot_set_exports_as_the_g2o_of_its_graphs(
     ops: MapOperations, folder: Path, fmt: str, tmp_path: Path
 ) -> None:
     assert detect_format(folder) == fmt
-    await ops.import_map(str(folder))
+    await ops.imports.import_map(str(folder))
     graphs = read_kimera(folder) if fmt == "kimera-csv" else read_g2o_source(folder, None, None)
     for graph in graphs:
         expected = io.StringIO()
@@ -171,10 +171,10 @@ async def test_a_multi_robot_set_exports_as_the_g2o_of_its_graphs(
 async def test_a_landmark_file_exports_as_g2o_that_comes_back_byte_for_byte(
     ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
-    await ops.import_map(str(source))
+    await ops.imports.import_map(str(source))
     out, again = tmp_path / "first.g2o", tmp_path / "again.g2o"
     await ops.export_map(source.stem, str(out))
-    await ops.import_map(str(out), mission="again")
+    await ops.imports.import_map(str(out), mission="again")
     await ops.export_map("again", str(again))
 
     text = out.read_text()
@@ -187,7 +187,7 @@ async def test_a_landmark_file_exports_as_g2o_that_comes_back_byte_for_byte(
 async def test_a_cloud_exports_its_points_the_same_way_twice(
     ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
-    await ops.import_map(str(source), voxel=0)
+    await ops.imports.import_map(str(source), voxel=0)
     first, second = tmp_path / f"a{source.suffix}", tmp_path / f"b{source.suffix}"
     await ops.export_map(source.stem, str(first))
     await ops.export_map(source.stem, str(second))
@@ -202,7 +202,7 @@ async def test_a_cloud_exports_its_points_the_same_way_twice(
 async def test_a_laser_log_exports_its_trajectory_and_its_scans(
     ops: MapOperations, source: Path, tmp_path: Path
 ) -> None:
-    info = await ops.import_map(str(source))
+    info = await ops.imports.import_map(str(source))
     (mission,) = info["missions"]
     with open_log(source) as log:
         scans = [r for r in read_records(log) if isinstance(r, Scan)]
