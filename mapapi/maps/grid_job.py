@@ -37,6 +37,7 @@ from mapapi.maps.grid import (
     grid_spec,
     write_nav2,
 )
+from mapapi.maps.map_tiles import MapTile, write_tiles
 from mapapi.maps.occupancy import compose_tiles, nav2_pixels, tiles_box
 from mapapi.maps.schema import CLOUDS, GRIDS, VERTICES
 from mapapi.maps.stored import mission_row, rows_of
@@ -94,10 +95,12 @@ def grid_missions(
     box: BBox | None,
     resolution: float,
     frame: str = MISSION,
+    tile: int | None = None,
 ) -> dict[str, object]:
     """Cast the scans of `missions` as of `time` into a grid of `resolution`
     over `box` (default: around every ray) in `frame`, and write it to the
-    nav2 YAML `target` and the PGM beside it; what was written.
+    nav2 YAML `target` and the PGM beside it (with `tile`, as tiles of that
+    many cells a side: `map_tiles`); what was written.
 
     Raises:
         UsageError: none of the missions has a laser scan, the grid would be
@@ -125,7 +128,7 @@ def grid_missions(
     counts = OccupancyCounts(spec)
     counts.add_rays(origins, ends)
     pixels = counts.image()
-    info = _written(pixels, spec, target)
+    info = _written(pixels, spec, target, tile)
     info.update(
         missions=cast,
         without_scans=[name for name in missions if name not in cast],
@@ -142,10 +145,12 @@ def write_stored_grids(
     target: Path,
     box: BBox | None,
     resolution: float | None,
+    tile: int | None = None,
 ) -> dict[str, object]:
     """Write the stored occupancy grids of `missions` as of `time`, composed over
     `box` (default: around their tiles) at their resolution, as the nav2 YAML
-    `target` and the PGM beside it; what was written (as `grid_missions` says it).
+    `target` and the PGM beside it, or as tiles of `tile` cells a side; what was
+    written (as `grid_missions` says it).
 
     Raises:
         UsageError: a mission holds no grid tiles here, the grids' resolutions
@@ -179,16 +184,35 @@ def write_stored_grids(
     else:
         area, xmax, ymax = box, box.xmax, box.ymax
     spec = grid_spec(area.xmin, area.ymin, xmax, ymax, side)
-    info = _written(nav2_pixels(compose_tiles(tiles, spec)), spec, target)
+    info = _written(nav2_pixels(compose_tiles(tiles, spec)), spec, target, tile)
     info.update(missions=missions, without_scans=[], scans=0, rays=0)
     return info
 
 
-def _written(pixels: npt.NDArray[np.uint8], spec: GridSpec, target: Path) -> dict[str, object]:
-    """Write `pixels` as nav2's map at `target`; what a grid's JSON says of it."""
-    image = write_nav2(pixels, spec, target)
+def _written(
+    pixels: npt.NDArray[np.uint8], spec: GridSpec, target: Path, tile: int | None
+) -> dict[str, object]:
+    """Write `pixels` as nav2's map at `target`, or with `tile`, as tiles of that
+    many cells a side and their index (`map_tiles`); what a grid's JSON says of it."""
+    if tile is None:
+        files: dict[str, object] = {
+            "path": str(target),
+            "image": str(write_nav2(pixels, spec, target)),
+            "tile": None,
+            "tiles": [],
+            "skipped": 0,
+        }
+    else:
+        tiled = write_tiles(pixels, spec, target, tile)
+        files = {
+            "path": str(tiled.index),
+            "image": None,
+            "tile": tile,
+            "tiles": [_tile_json(t) for t in tiled.tiles],
+            "skipped": tiled.skipped,
+        }
     return {
-        "image": str(image),
+        **files,
         "width": spec.width,
         "height": spec.height,
         "resolution": spec.resolution,
@@ -198,4 +222,17 @@ def _written(pixels: npt.NDArray[np.uint8], spec: GridSpec, target: Path) -> dic
             "free": int(np.count_nonzero(pixels == FREE)),
             "unknown": int(np.count_nonzero(pixels == UNKNOWN)),
         },
+    }
+
+
+def _tile_json(tile: MapTile) -> dict[str, object]:
+    """What a grid's JSON says of one tile written."""
+    return {
+        "row": tile.row,
+        "col": tile.col,
+        "path": str(tile.yaml),
+        "image": str(tile.image),
+        "width": tile.spec.width,
+        "height": tile.spec.height,
+        "origin": [tile.spec.x0, tile.spec.y0, 0.0],
     }

@@ -63,19 +63,23 @@ class GridOperations:
         bbox: list[float] | None = None,
         resolution: float | None = None,
         frame: str = "mission",
+        tile: int | None = None,
     ) -> Json:
         """Cast the laser scans of the missions named or matching a pattern
         (default: every mission held here with scans, else every grid mission)
         into an occupancy grid over `bbox`'s x and y (default: around every
         ray), `resolution` metres a cell (default `DEFAULT_RESOLUTION`), in
         `frame` ("world" once aligned); write it as nav2's YAML `path` and a
-        PGM beside it. Grid missions (a bag's occupancy grid) are written as
-        stored, composed over `bbox`, at their own resolution.
+        PGM beside it; with `tile`, as nav2 maps of at most `tile` cells a
+        side and their index (`mapapi.maps.map_tiles`). Grid missions (a bag's
+        occupancy grid) are written as stored, composed over `bbox`, at their
+        own resolution.
 
         Raises:
             UsageError: a name matches no mission here, no mission has laser
                 scans or a grid, laser and grid missions are mixed, the grid
-                would exceed `grid.MAX_SIDE` cells a side, in the world frame a
+                would exceed `grid.MAX_SIDE` cells a side, `tile` is below 1,
+                in the world frame a
                 mission was never aligned, or a stored grid is asked for in the
                 world frame or at another resolution.
         """
@@ -86,6 +90,8 @@ class GridOperations:
         from mapapi.maps.stored import read_time
 
         target = grid_target(path)
+        if tile is not None and tile < 1:
+            raise UsageError(f"a tile is at least one cell a side, not {tile}")
         box = None if bbox is None else BBox.from_tuple(bbox)
         chosen, gridded = await self._chosen(missions)
         started = time.perf_counter()
@@ -96,7 +102,7 @@ class GridOperations:
                 )
             async with read_time(self.peer, chosen, (MISSIONS, GRIDS)) as at:
                 info = await run_job(
-                    self.peer, write_stored_grids, at, chosen, target, box, resolution
+                    self.peer, write_stored_grids, at, chosen, target, box, resolution, tile
                 )
         else:
             async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:
@@ -109,9 +115,9 @@ class GridOperations:
                     box,
                     resolution or DEFAULT_RESOLUTION,
                     frame,
+                    tile,
                 )
         return {
-            "path": str(target),
             **info,
             "frame": frame,
             "bbox": None if box is None else list(box.as_tuple()),

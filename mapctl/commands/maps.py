@@ -34,6 +34,18 @@ def _size_text(mission: dict[str, Any]) -> str:
     return graph
 
 
+def _grid_files(output: Path, info: dict[str, Any]) -> str:
+    """The files a grid was written to, as `grid` and `export` say them (beside
+    `output`, as the user named it)."""
+    if info["tile"] is None:
+        return f"{output} and {Path(info['image']).name}"
+    skipped = f", {info['skipped']} all unknown left out" if info["skipped"] else ""
+    return (
+        f"{len(info['tiles'])} tile(s) of up to {info['tile']} x {info['tile']} cells"
+        f"{skipped}, listed in {output.with_name(Path(info['path']).name)}"
+    )
+
+
 def _holders_text(holders: list[dict[str, Any]]) -> str:
     return ", ".join(h["name"] or h["id"][:8] for h in holders) or "?"
 
@@ -285,7 +297,10 @@ def plot(
 
 
 @click.command("grid")
-@_output_option("The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm).")
+@_output_option(
+    "The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm). With --tile, "
+    "NAME.yaml names the tiles and their index, NAME.tiles.yaml."
+)
 @missions_option("Cast the scans of", "every mission held here with laser scans")
 @_bbox_option("The grid covers this box's x and y (default: every scan's rays).")
 @click.option(
@@ -295,6 +310,13 @@ def plot(
     help="The side of a cell, in metres (scans: 0.05 by default; a stored grid keeps its own).",
 )
 @frame_option("Cast the scans")
+@click.option(
+    "--tile",
+    type=click.IntRange(min=1),
+    metavar="CELLS",
+    help="Cut the map into nav2 maps of at most CELLS x CELLS cells, NAME_r{row}_c{col}.yaml "
+    "(row 0 the bottom), skipping tiles all unknown, listed in NAME.tiles.yaml.",
+)
 @json_option
 @pass_session
 def grid(
@@ -304,6 +326,7 @@ def grid(
     bbox: tuple[float, ...] | None,
     resolution: float | None,
     frame: str,
+    tile: int | None,
     as_json: bool,
 ) -> None:
     """Write an occupancy grid of laser missions, or the stored grids of grid
@@ -326,6 +349,7 @@ def grid(
         bbox=list(bbox) if bbox else None,
         resolution=resolution,
         frame=frame,
+        tile=tile,
     )
     if as_json:
         render.emit_json(info)
@@ -333,7 +357,7 @@ def grid(
     cells = info["cells"]
     source = f"{info['scans']} scans of" if info["scans"] else "the stored grid of"
     render.line(
-        f"wrote {output} and {Path(info['image']).name}: {info['width']} x {info['height']} "
+        f"wrote {_grid_files(output, info)}: {info['width']} x {info['height']} "
         f"cells of {info['resolution']} m from {source} "
         f"{', '.join(info['missions'])} ({cells['occupied']} occupied, {cells['free']} free, "
         f"{cells['unknown']} unknown) in {info['seconds']:.2f} s"
