@@ -6,9 +6,9 @@ every scan: seconds for a large log) runs off the event loop, in a process of
 its own while the peer serves a swarm (`jobs.run_job`), reading the missions
 as of one time (`stored.read_time`), as `export` and `plot` do.
 
-Not a mode of `export`: `export` writes one mission to a file, while a grid
-covers a box of the merged map, from any number of missions, chosen as `plot`
-chooses them; it writes two files and says different things about them.
+A command of its own: a grid covers a box of the merged map, from any number
+of missions, chosen as `plot` chooses them. `export MISSION -o FILE.yaml`
+(format `grid`) delegates here (`export_grid`): the grid of that one mission.
 """
 
 from __future__ import annotations
@@ -46,8 +46,13 @@ def grid_target(path: str) -> Path:
     return target
 
 
+EXPORTED = ("image", "width", "height", "resolution", "origin", "cells", "scans")
+"""What `export_grid` tells of the grid, beside what every export tells."""
+
+
 class GridOperations:
-    """The `grid_map` operation over one peer."""
+    """The `grid_map` operation over one peer, and `export_grid`, which
+    `MapOperations.export_map` delegates a nav2 map (`.yaml`) to."""
 
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
@@ -123,6 +128,18 @@ class GridOperations:
             "bbox": None if box is None else list(box.as_tuple()),
             "seconds": round(time.perf_counter() - started, 3),
         }
+
+    async def export_grid(self, mission: str, path: str, frame: str = "mission") -> Json:
+        """Write the grid of one mission (its stored grid, or its scans cast at
+        `DEFAULT_RESOLUTION`) in `frame` as nav2's YAML `path` and a PGM beside
+        it: `grid_map` of that mission, said as `export` says what it wrote.
+
+        Raises:
+            UsageError: as `grid_map`; the mission has no laser scan nor grid.
+        """
+        info = await self.grid_map(path, [mission], frame=frame)
+        told = {key: info[key] for key in EXPORTED}
+        return {"mission": mission, "path": info["path"], "format": "grid", "frame": frame, **told}
 
     async def _chosen(self, missions: list[str] | None) -> tuple[list[str], bool]:
         """The missions to grid, and whether they are grid missions (whose stored

@@ -10,7 +10,7 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosbag")
-EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag")  # mapapi.maps.jobs.EXPORT_FORMATS
+EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag", "grid")  # maps.jobs.EXPORT_FORMATS
 
 
 def _bbox_text(box: list[float] | None) -> str:
@@ -148,14 +148,15 @@ def _output_option(text: str) -> Any:
 @click.argument("mission")
 @_output_option(
     "The file to write: .g2o for a pose graph, .tum or .kitti for its trajectory, "
-    ".ply or .pcd for a point cloud; with --format bag, the ROS 2 bag's new folder."
+    ".ply or .pcd for a point cloud, .yaml for a nav2 map (the PGM beside it); with "
+    "--format bag, the ROS 2 bag's new folder."
 )
 @click.option(
     "--format",
     "fmt",
     type=click.Choice(EXPORT_FORMATS),
     help="The format to write (default: by the extension; needed for .txt and for bag, "
-    "a ROS 2 bag in MCAP of the poses, path and points).",
+    "a ROS 2 bag in MCAP of the poses, path and points; .yaml means grid, a nav2 map).",
 )
 @frame_option("Write a graph's poses")
 @json_option
@@ -165,7 +166,8 @@ def export_map(
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
     its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD),
-    poses, path and points as a ROS 2 bag (MCAP)."""
+    poses, path and points as a ROS 2 bag (MCAP), its occupancy grid (stored, or
+    cast from its laser scans as `mapctl grid` does) as a nav2 map."""
     from mapctl import render
 
     info = session.call(
@@ -176,6 +178,13 @@ def export_map(
         return
     if info["format"] == "bag":
         what = f"{info['poses']} poses, {info['points']} points on {', '.join(info['topics'])}"
+    elif info["format"] == "grid":
+        cells = info["cells"]
+        what = (
+            f"a nav2 map of {info['width']} x {info['height']} cells of {info['resolution']} m, "
+            f"image {Path(info['image']).name} ({cells['occupied']} occupied, "
+            f"{cells['free']} free, {cells['unknown']} unknown)"
+        )
     elif info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
         if info.get("landmarks"):
