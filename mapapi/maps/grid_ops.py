@@ -74,26 +74,27 @@ class GridOperations:
         (default: every mission held here with scans, else every grid mission)
         into an occupancy grid over `bbox`'s x and y (default: around every
         ray), `resolution` metres a cell (default `DEFAULT_RESOLUTION`), in
-        `frame` ("world" once aligned); write it as nav2's YAML `path` and a
+        `frame` ("world" once placed there); write it as nav2's YAML `path` and a
         PGM beside it; with `tile`, as nav2 maps of at most `tile` cells a
         side and their index (`mapapi.maps.map_tiles`). Grid missions (a bag's
         occupancy grid) are written as stored, composed over `bbox`, at their
-        own resolution.
+        own resolution; in the world frame, resampled into its axes.
 
         Raises:
             UsageError: a name matches no mission here, no mission has laser
                 scans or a grid, laser and grid missions are mixed, the grid
                 would exceed `grid.MAX_SIDE` cells a side, `tile` is below 1,
-                in the world frame a
-                mission was never aligned, or a stored grid is asked for in the
-                world frame or at another resolution.
+                in the world frame a mission was never placed there (or a grid
+                mission's place tilts the plane), or a stored grid is asked
+                for at another resolution.
         """
-        from mapapi.maps.frames import frame_reads
+        from mapapi.maps.frames import MISSION, frame_reads
         from mapapi.maps.grid_job import grid_missions, write_stored_grids
         from mapapi.maps.jobs import run_job
-        from mapapi.maps.schema import CLOUDS, GRIDS, MISSIONS
+        from mapapi.maps.schema import CLOUDS, FRAMES, GRIDS, MISSIONS
         from mapapi.maps.stored import read_time
 
+        frame_reads(frame)  # refuses an unknown frame
         target = grid_target(path)
         if tile is not None and tile < 1:
             raise UsageError(f"a tile is at least one cell a side, not {tile}")
@@ -101,13 +102,10 @@ class GridOperations:
         chosen, gridded = await self._chosen(missions)
         started = time.perf_counter()
         if gridded:
-            if frame != "mission":
-                raise UsageError(
-                    "stored occupancy grids are written in their own frame only; drop --frame world"
-                )
-            async with read_time(self.peer, chosen, (MISSIONS, GRIDS)) as at:
+            reads = (MISSIONS, GRIDS) if frame == MISSION else (MISSIONS, GRIDS, FRAMES)
+            async with read_time(self.peer, chosen, reads) as at:
                 info = await run_job(
-                    self.peer, write_stored_grids, at, chosen, target, box, resolution, tile
+                    self.peer, write_stored_grids, at, chosen, target, box, resolution, frame, tile
                 )
         else:
             async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:

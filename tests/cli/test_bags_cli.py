@@ -136,7 +136,7 @@ class TestGrid:
         assert "not both; choose one kind with -m" in mixed.err
         world = mapctl.main("grid", "-o", out, "-m", "run-map", "--frame", "world")
         assert world.code == EXIT_USAGE
-        assert "in their own frame only" in world.err
+        assert "has no place in the world frame yet" in world.err
 
 
 class TestExport:
