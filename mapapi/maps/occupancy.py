@@ -1,18 +1,21 @@
 """Occupancy grids as map data (issue 17 §3): a ROS `nav_msgs/OccupancyGrid` as
 a mission of grid tiles, and the tiles composed back into one raster.
 
-An `OccupancyGrid` is an axis-aligned raster of int8 occupancy in its mission's
-frame, as ROS gives it: -1 unknown, 0 (free) to 100 (occupied), row 0 the
-bottom (lowest y). It is stored cut into tiles of at most `TILE_SIDE` cells a
-side (`grid_tiles`), each a `GridTile` row placed in the spatial index at its
-box, so a box query finds the part of a large map it overlaps.
+An `OccupancyGrid` is a raster of int8 occupancy in its mission's frame, as
+ROS gives it: -1 unknown, 0 (free) to 100 (occupied), row 0 the bottom, its
+columns along the frame's x turned by its origin's yaw (0 for most maps). It
+is stored cut into tiles of at most `TILE_SIDE` cells a side (`grid_tiles`),
+each a `GridTile` row (with the yaw) placed in the spatial index at the box
+around its turned footprint, so a box query finds the part of a large map it
+overlaps.
 
-`compose_tiles` puts tiles back into any raster of the same resolution: each
-tile cell lands in the raster cell holding its centre, so grids whose origins
-are not on the raster's lattice still land in the nearest cell, and a raster
-cell no tile covers stays unknown. `nav2_pixels` maps occupancy to nav2's
-trinary pixels with the thresholds `mapctl grid` casts with (`mapapi.maps.grid`).
-Pure: numpy only.
+`compose_tiles` puts tiles back into any raster of the same resolution along
+its frame's axes, each tile moved by its mission's place there if any (the
+world frame: `mapapi.maps.plane`): a raster cell takes the tile cell its
+centre falls in, so grids whose origins are not on the raster's lattice, or
+turned, land in the nearest cells, and a raster cell no tile covers stays
+unknown. `nav2_pixels` maps occupancy to nav2's trinary pixels with the
+thresholds `mapctl grid` casts with (`mapapi.maps.grid`). Pure: numpy only.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ class OccupancyGrid:
         x0, y0, z: its lower-left corner (column 0, row 0) in `frame`.
         cells: int8 occupancy, (height, width), row 0 the bottom.
         stamp: the message's header stamp, seconds.
+        yaw: its origin's turn about z, radians: its columns run along `frame`'s
+            x turned by it.
     """
 
     name: str
@@ -57,17 +62,26 @@ class OccupancyGrid:
     z: float
     cells: Cells
     stamp: float = 0.0
+    yaw: float = 0.0
 
     def bbox(self) -> BBox:
-        """The box of its cells (flat, at `z`)."""
+        """The box around its cells (flat, at `z`)."""
         height, width = self.cells.shape
         return self.cells_box(0, 0, width, height)
 
-    def cells_box(self, col: int, row: int, width: int, height: int) -> BBox:
-        """The box of `width` x `height` cells from column `col`, row `row`."""
+    def corner(self, col: int, row: int) -> Placement:
+        """Where the cells from column `col`, row `row` on lie: that cell's
+        lower-left corner, turned as the grid is."""
         side = self.resolution
-        x, y = self.x0 + col * side, self.y0 + row * side
-        return BBox(x, y, self.z, x + width * side, y + height * side, self.z)
+        ((x, y),) = Placement(self.x0, self.y0, self.yaw).apply(
+            np.array([[col * side, row * side]])
+        )
+        return Placement(float(x), float(y), self.yaw)
+
+    def cells_box(self, col: int, row: int, width: int, height: int) -> BBox:
+        """The box around `width` x `height` cells from column `col`, row `row`."""
+        side = self.resolution
+        return footprint_box(self.corner(col, row), width * side, height * side, self.z)
 
     def known(self) -> int:
         """How many of its cells are known (not -1)."""
@@ -83,17 +97,18 @@ def grid_tiles(grid: OccupancyGrid) -> list[GridTile]:
         for col in range(0, width, TILE_SIDE):
             part = grid.cells[row : row + TILE_SIDE, col : col + TILE_SIDE]
             rows, cols = part.shape
-            box = grid.cells_box(col, row, cols, rows)
+            where = grid.corner(col, row)
             tiles.append(
                 GridTile(
                     mission=grid.name,
                     resolution=grid.resolution,
-                    x=box.xmin,
-                    y=box.ymin,
+                    x=where.x,
+                    y=where.y,
+                    yaw=grid.yaw,
                     width=cols,
                     height=rows,
                     cells=np.ascontiguousarray(part, dtype=np.int8).tobytes(),
-                    bbox=box_to_pb(box),
+                    bbox=box_to_pb(grid.cells_box(col, row, cols, rows)),
                     stamp=grid.stamp,
                 )
             )
@@ -121,7 +136,7 @@ Places = Mapping[str, Placement]
 def tile_placement(tile: GridTile, places: Places | None = None) -> Placement:
     """Where the tile's cells lie: its column 0, row 0 corner and its turn, in
     its mission's frame, moved by the mission's place in `places` if any."""
-    own = Placement(tile.x, tile.y)
+    own = Placement(tile.x, tile.y, tile.yaw)
     place = (places or {}).get(tile.mission)
     return own if place is None else own.then(place)
 

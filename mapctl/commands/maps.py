@@ -318,7 +318,7 @@ def plot(
     default=None,
     help="The side of a cell, in metres (scans: 0.05 by default; a stored grid keeps its own).",
 )
-@frame_option("Cast the scans")
+@frame_option("Cast the scans (or write the stored grids)")
 @click.option(
     "--tile",
     type=click.IntRange(min=1),
@@ -347,7 +347,8 @@ def grid(
     65 % of the rays reaching it is occupied, in fewer than 25 % free. Several
     missions share one grid in the world frame (`mapctl align`). A stored
     grid's cells (a bag's occupancy grid) are written as they are: at least
-    65 occupied, below 25 free.
+    65 occupied, below 25 free; a grid turned at its origin, or placed in the
+    world frame (a `frames` row), is resampled along the frame's axes.
     """
     from mapctl import render
 
