@@ -10,7 +10,10 @@ that returned nothing, so no ray is cast for them.
 
 Grid missions (a bag's `nav_msgs/OccupancyGrid`, `mapapi.maps.occupancy`) are
 cast already: `write_stored_grids` composes their tiles at their own resolution
-and writes their occupancy as nav2's pixels, without resampling.
+and writes their occupancy as nav2's pixels: cell for cell when the tiles lie
+along the axes, else (an origin turned about z, or a mission's place in the
+world frame, `grid_places`) resampled along them, nearest neighbour.
+With a tile side, either is written as nav2 tiles (`mapapi.maps.map_tiles`).
 """
 
 from __future__ import annotations
