@@ -66,6 +66,7 @@ def operations(
     the swarm's (`peer status` with the daemon's `loop_lag`), watches, the maps'
     and (`on_shutdown` given: in a daemon) `shutdown`."""
     views = Workspace(peer)  # one per peer: it serialises the commits of each view
+    grids = GridOperations(peer)
     return Operations(
         peer,
         (
@@ -73,9 +74,9 @@ def operations(
             ViewOperations(peer, views),
             SwarmOperations(peer, loop_lag),
             WatchOperations(peer),
-            MapOperations(peer),
+            MapOperations(peer, grids),
             AlignOperations(peer, views),
-            GridOperations(peer),
+            grids,
             DaemonOperations(on_shutdown),
             FsckOperations(peer),
             GcOperations(peer),

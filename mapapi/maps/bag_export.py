@@ -192,7 +192,7 @@ def write_bag(content: BagContent, target: Path) -> dict[str, Any]:
     return {
         "poses": len(content.poses),
         "points": sum(len(p) for _, p in content.scans),
-        "cells": 0 if content.grid is None else int(content.grid.cells.size),
+        "grid_cells": 0 if content.grid is None else int(content.grid.cells.size),
         "time": "timestamp" if content.timed else "index",
         "topics": topics,
     }

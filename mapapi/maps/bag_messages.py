@@ -148,28 +148,29 @@ def tf_links(message: Any) -> list[Link]:
     ]
 
 
-GridCells = tuple[float, float, float, float, npt.NDArray[np.int8]]
-"""(resolution, origin x, y, z, cells (height, width), row 0 the bottom)."""
+GridCells = tuple[float, float, float, float, float, npt.NDArray[np.int8]]
+"""(resolution, origin x, y, z, yaw, cells (height, width), row 0 the bottom)."""
 
 
 def grid_cells(message: Any) -> GridCells:
-    """A `nav_msgs/OccupancyGrid`'s resolution, origin and int8 cells.
+    """A `nav_msgs/OccupancyGrid`'s resolution, origin (with its yaw) and int8 cells.
 
-    Only a grid whose origin is not rotated about z is read: its cells are then
-    axis-aligned in its frame, as tiles (`mapapi.maps.occupancy`) and nav2's
-    YAML (whose yaw map_server ignores) have them.
+    A grid whose origin is turned about z is read with its yaw: its tiles keep
+    it (`mapapi.maps.occupancy`), and writing it for nav2 (whose YAML yaw
+    map_server ignores) resamples it along the frame's axes. A grid tilted out
+    of the plane (roll or pitch) is not a 2D map of that frame.
 
     Raises:
-        ValueError: a rotated origin, a resolution that is not positive, or fewer
+        ValueError: a tilted origin, a resolution that is not positive, or fewer
             or more cells than width x height.
     """
     info = message.info
     x, y, z, qx, qy, qz, qw = pose_of(info.origin)
     yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-    if abs(yaw) > 1e-9 or abs(qx) > 1e-9 or abs(qy) > 1e-9:
+    if abs(qx) > 1e-9 or abs(qy) > 1e-9:
         raise ValueError(
-            f"the grid's origin is rotated (yaw {math.degrees(yaw):.3f} degrees); only grids "
-            "with an unrotated origin are imported"
+            f"the grid's origin is tilted (qx {qx:.6f}, qy {qy:.6f}); only grids turned "
+            "about z alone are imported"
         )
     if not info.resolution > 0:
         raise ValueError(f"the grid's resolution is {info.resolution}, not positive")
@@ -180,4 +181,4 @@ def grid_cells(message: Any) -> GridCells:
     # ROS states the resolution as a float32: 0.05 arrives as 0.0500000007; its
     # shortest float32 decimal gives back the 0.05 the map was made with
     resolution = float(str(np.float32(info.resolution)))
-    return resolution, x, y, z, data.reshape(height, width)
+    return resolution, x, y, z, yaw, data.reshape(height, width)

@@ -75,6 +75,19 @@ def frame_at(peer: Peer, time: int, mission: str) -> WorldFrame | None:
     return frame_from_pb(found[0]) if found else None
 
 
+def place_in_world(peer: Peer, time: int, mission: str, hint: str) -> WorldFrame:
+    """The mission's place in the world frame as of `time` (`frame_at`).
+
+    Raises:
+        UsageError: it was never placed there; the message ends with `hint`,
+            what to do instead.
+    """
+    found = frame_at(peer, time, mission)
+    if found is None:
+        raise UsageError(f"mission {mission!r} has no place in the world frame yet; {hint}")
+    return found
+
+
 def graph_in(peer: Peer, time: int, mission: str, frame: str) -> MissionGraph:
     """`graph_at`, its poses in `frame` (in the world frame: moved by the mission's
     place there).
@@ -86,13 +99,8 @@ def graph_in(peer: Peer, time: int, mission: str, frame: str) -> MissionGraph:
     graph = graph_at(peer, time, mission)
     if frame == MISSION:
         return graph
-    found = frame_at(peer, time, mission)
-    if found is None:
-        raise UsageError(
-            f"mission {mission!r} has no place in the world frame yet; run `mapctl align`, "
-            "or read it in its own frame (--frame mission)"
-        )
-    return in_frame(graph, found.pose)
+    hint = "run `mapctl align`, or read it in its own frame (--frame mission)"
+    return in_frame(graph, place_in_world(peer, time, mission, hint).pose)
 
 
 def frame_item(mission: str, frame: str = WORLD) -> ItemId:

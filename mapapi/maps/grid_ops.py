@@ -6,9 +6,9 @@ every scan: seconds for a large log) runs off the event loop, in a process of
 its own while the peer serves a swarm (`jobs.run_job`), reading the missions
 as of one time (`stored.read_time`), as `export` and `plot` do.
 
-Not a mode of `export`: `export` writes one mission to a file, while a grid
-covers a box of the merged map, from any number of missions, chosen as `plot`
-chooses them; it writes two files and says different things about them.
+A command of its own: a grid covers a box of the merged map, from any number
+of missions, chosen as `plot` chooses them. `export MISSION -o FILE.yaml`
+(format `grid`) delegates here (`export_grid`): the grid of that one mission.
 """
 
 from __future__ import annotations
@@ -46,8 +46,13 @@ def grid_target(path: str) -> Path:
     return target
 
 
+EXPORTED = ("image", "width", "height", "resolution", "origin", "cells", "scans")
+"""What `export_grid` tells of the grid, beside what every export tells."""
+
+
 class GridOperations:
-    """The `grid_map` operation over one peer."""
+    """The `grid_map` operation over one peer, and `export_grid`, which
+    `MapOperations.export_map` delegates a nav2 map (`.yaml`) to."""
 
     def __init__(self, peer: Peer) -> None:
         self.peer = peer
@@ -63,40 +68,44 @@ class GridOperations:
         bbox: list[float] | None = None,
         resolution: float | None = None,
         frame: str = "mission",
+        tile: int | None = None,
     ) -> Json:
         """Cast the laser scans of the missions named or matching a pattern
         (default: every mission held here with scans, else every grid mission)
         into an occupancy grid over `bbox`'s x and y (default: around every
         ray), `resolution` metres a cell (default `DEFAULT_RESOLUTION`), in
-        `frame` ("world" once aligned); write it as nav2's YAML `path` and a
-        PGM beside it. Grid missions (a bag's occupancy grid) are written as
-        stored, composed over `bbox`, at their own resolution.
+        `frame` ("world" once placed there); write it as nav2's YAML `path` and a
+        PGM beside it; with `tile`, as nav2 maps of at most `tile` cells a
+        side and their index (`mapapi.maps.map_tiles`). Grid missions (a bag's
+        occupancy grid) are written as stored, composed over `bbox`, at their
+        own resolution; in the world frame, resampled into its axes.
 
         Raises:
             UsageError: a name matches no mission here, no mission has laser
                 scans or a grid, laser and grid missions are mixed, the grid
-                would exceed `grid.MAX_SIDE` cells a side, in the world frame a
-                mission was never aligned, or a stored grid is asked for in the
-                world frame or at another resolution.
+                would exceed `grid.MAX_SIDE` cells a side, `tile` is below 1,
+                in the world frame a mission was never placed there (or a grid
+                mission's place tilts the plane), or a stored grid is asked
+                for at another resolution.
         """
-        from mapapi.maps.frames import frame_reads
+        from mapapi.maps.frames import MISSION, frame_reads
         from mapapi.maps.grid_job import grid_missions, write_stored_grids
         from mapapi.maps.jobs import run_job
-        from mapapi.maps.schema import CLOUDS, GRIDS, MISSIONS
+        from mapapi.maps.schema import CLOUDS, FRAMES, GRIDS, MISSIONS
         from mapapi.maps.stored import read_time
 
+        frame_reads(frame)  # refuses an unknown frame
         target = grid_target(path)
+        if tile is not None and tile < 1:
+            raise UsageError(f"a tile is at least one cell a side, not {tile}")
         box = None if bbox is None else BBox.from_tuple(bbox)
         chosen, gridded = await self._chosen(missions)
         started = time.perf_counter()
         if gridded:
-            if frame != "mission":
-                raise UsageError(
-                    "stored occupancy grids are written in their own frame only; drop --frame world"
-                )
-            async with read_time(self.peer, chosen, (MISSIONS, GRIDS)) as at:
+            reads = (MISSIONS, GRIDS) if frame == MISSION else (MISSIONS, GRIDS, FRAMES)
+            async with read_time(self.peer, chosen, reads) as at:
                 info = await run_job(
-                    self.peer, write_stored_grids, at, chosen, target, box, resolution
+                    self.peer, write_stored_grids, at, chosen, target, box, resolution, frame, tile
                 )
         else:
             async with read_time(self.peer, chosen, (*frame_reads(frame), CLOUDS)) as at:
@@ -109,14 +118,26 @@ class GridOperations:
                     box,
                     resolution or DEFAULT_RESOLUTION,
                     frame,
+                    tile,
                 )
         return {
-            "path": str(target),
             **info,
             "frame": frame,
             "bbox": None if box is None else list(box.as_tuple()),
             "seconds": round(time.perf_counter() - started, 3),
         }
+
+    async def export_grid(self, mission: str, path: str, frame: str = "mission") -> Json:
+        """Write the grid of one mission (its stored grid, or its scans cast at
+        `DEFAULT_RESOLUTION`) in `frame` as nav2's YAML `path` and a PGM beside
+        it: `grid_map` of that mission, said as `export` says what it wrote.
+
+        Raises:
+            UsageError: as `grid_map`; the mission has no laser scan nor grid.
+        """
+        info = await self.grid_map(path, [mission], frame=frame)
+        told = {key: info[key] for key in EXPORTED}
+        return {"mission": mission, "path": info["path"], "format": "grid", "frame": frame, **told}
 
     async def _chosen(self, missions: list[str] | None) -> tuple[list[str], bool]:
         """The missions to grid, and whether they are grid missions (whose stored

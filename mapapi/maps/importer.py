@@ -175,8 +175,9 @@ def _prepare(source: MapSource) -> _Prepared:
         cut = grid_tiles(source)
         height, width = source.cells.shape
         summary = f"{width} x {height} cells of {source.resolution} m in {len(cut)} tiles"
-        part = _Part(GRIDS, len(cut), lambda: list(cut))
-        return _Prepared(source, mission_to_pb(source), [part], GRID_TABLES, summary)
+        # its frames chunk, as a graph's (below): where its place in the world goes
+        parts = [_Part(FRAMES, 0, list), _Part(GRIDS, len(cut), lambda: list(cut))]
+        return _Prepared(source, mission_to_pb(source), parts, GRID_TABLES, summary)
     check_graph(source)
     tiles = tile_graph(source)
     summary = f"{len(source.vertices)} vertices, {len(source.edges)} edges in {len(tiles)} tiles"

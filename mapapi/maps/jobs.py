@@ -42,8 +42,13 @@ T = TypeVar("T")
 
 
 BAG = "bag"  # a ROS 2 bag: a folder, so no extension names it (`mapapi.maps.bag_export`)
-EXPORT_FORMATS = ("g2o", *TRAJECTORY_FORMATS, *CLOUD_FORMATS, BAG)
-_BY_SUFFIX = {f".{fmt}": fmt for fmt in EXPORT_FORMATS if fmt != BAG}
+GRID = "grid"  # nav2's map YAML and PGM, written by the grid operation (`mapapi.maps.grid_ops`)
+EXPORT_FORMATS = ("g2o", *TRAJECTORY_FORMATS, *CLOUD_FORMATS, BAG, GRID)
+_BY_SUFFIX = {
+    **{f".{fmt}": fmt for fmt in EXPORT_FORMATS if fmt not in (BAG, GRID)},
+    ".yaml": GRID,
+    ".yml": GRID,
+}
 _AMBIGUOUS = {".txt": TRAJECTORY_FORMATS}  # TUM and KITTI files are both often .txt
 
 

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from mapapi.core.errors import RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
+from mapapi.maps.grid_ops import GridOperations
 from mapapi.maps.schema import CLOUDS, FRAMES, MISSIONS
 from mapapi.service.ops import Operation
 from mapapi.service.transfer_ops import online, placed_json
@@ -81,11 +82,12 @@ def _load_key(bbox: list[float], table: str | None) -> str:
 class MapOperations:
     """Map operations over one peer (see the module docstring)."""
 
-    def __init__(self, peer: Peer) -> None:
+    def __init__(self, peer: Peer, grids: GridOperations | None = None) -> None:
         from mapapi.maps.import_ops import ImportOperations
 
         self.peer = peer
         self.imports = ImportOperations(peer)
+        self.grids = grids or GridOperations(peer)  # writes `export`'s nav2 maps
         self._loads: dict[str, tuple[int, int]] = {}  # load key -> (loaded, to load so far)
 
     def operations(self) -> Mapping[str, Operation]:
@@ -103,14 +105,16 @@ class MapOperations:
         self, mission: str, path: str, fmt: str | None = None, frame: str = "mission"
     ) -> Json:
         """Write a mission to a file in `fmt`, by default the one the extension
-        names: a graph as g2o (2D when it is planar), its poses as a TUM or KITTI
-        trajectory, a cloud as PLY or PCD (`mapapi.maps.jobs.export_mission`);
-        a graph's poses in `frame` ("world" once aligned)."""
-        from mapapi.maps.jobs import export_format, export_mission, export_reads
+        names (`mapapi.maps.jobs.export_mission`: a graph as g2o, its poses as TUM
+        or KITTI, a cloud as PLY or PCD, a ROS 2 bag; a nav2 map through
+        `GridOperations.export_grid`); a graph's poses in `frame`."""
+        from mapapi.maps.jobs import GRID, export_format, export_mission, export_reads
         from mapapi.maps.stored import read_time
 
         target = absolute(path)
         fmt = export_format(target, fmt)
+        if fmt == GRID:
+            return await self.grids.export_grid(mission, str(target), frame)
         async with read_time(self.peer, [mission], export_reads(fmt, frame)) as at:
             counts = await self._job(export_mission, at, mission, target, fmt, frame)
         return {"mission": mission, "path": str(target), "format": fmt, "frame": frame, **counts}

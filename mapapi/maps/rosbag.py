@@ -24,8 +24,8 @@ What becomes what (`read_bag`):
   TF parent of an odometry's `child_frame_id`. The tree itself is not stored;
 - each `nav_msgs/OccupancyGrid` topic is one grid mission (`mapapi.maps.occupancy`)
   of its **last** message (a map is republished whole as it grows), in its
-  header's frame. Only a grid whose origin is not rotated is read: a rotated one
-  is refused, naming the topic (rotating its cells would resample them).
+  header's frame, its origin's yaw kept with its tiles. A grid tilted out of
+  the plane (an origin with roll or pitch) is refused, naming the topic.
   Other types are skipped.
 
 Messages are read one at a time, in one pass (a bag never sits in memory; a
@@ -148,11 +148,11 @@ class _Bag:
 
     def read_grid(self, topic: str, message: Any, received: float) -> None:
         """Keep a grid message as its topic's grid: each replaces the last."""
-        resolution, x, y, z, cells = msgs.grid_cells(message)
+        resolution, x, y, z, yaw, cells = msgs.grid_cells(message)
         name = mission_name(self.prefix, topic)
         frame = f"{name}/{msgs.frame_name(message.header.frame_id) or 'map'}"
         stamp = msgs.stamp_seconds(message.header.stamp) or received
-        grid = OccupancyGrid(name, self.robot, frame, resolution, x, y, z, cells, stamp)
+        grid = OccupancyGrid(name, self.robot, frame, resolution, x, y, z, cells, stamp, yaw)
         self.grids[topic] = grid
 
     def missions(self, voxel: float) -> list[MapSource]:
@@ -220,7 +220,7 @@ def read_bag(
     Raises:
         MapImportError: not a bag rosbags reads, a message that does not decode or
             is not a valid map value (naming the topic and the message's index on
-            it: a rotated grid origin among them), or no supported topic with data.
+            it: a tilted grid origin among them), or no supported topic with data.
         UsageError: rosbags is missing, or `topics` names a topic the bag lacks or
             one of a type not imported.
     """

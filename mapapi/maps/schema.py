@@ -48,7 +48,8 @@ GRAPH_TABLES: dict[str, type[Message]] = {
     FRAMES: Frame,
 }
 CLOUD_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, CLOUDS: PointCloudBlock}
-GRID_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, GRIDS: GridTile}
+# a grid's import makes its frames chunk too, where its place in the world goes
+GRID_TABLES: dict[str, type[Message]] = {MISSIONS: Mission, GRIDS: GridTile, FRAMES: Frame}
 LASER_TABLES: dict[str, type[Message]] = {**GRAPH_TABLES, CLOUDS: PointCloudBlock}
 MAP_TABLES: dict[str, type[Message]] = {
     **GRAPH_TABLES,

@@ -10,7 +10,7 @@ import click
 from mapctl.session import Session, json_option, pass_session
 
 FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosbag")
-EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag")  # mapapi.maps.jobs.EXPORT_FORMATS
+EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag", "grid")  # maps.jobs.EXPORT_FORMATS
 UP_CHOICES = ("auto", "x", "y", "z", "-x", "-y", "-z")  # mapapi.maps.view_axes.UP_CHOICES
 
 
@@ -33,6 +33,18 @@ def _size_text(mission: dict[str, Any]) -> str:
             else f"{mission['points']} points"
         )
     return graph
+
+
+def _grid_files(output: Path, info: dict[str, Any]) -> str:
+    """The files a grid was written to, as `grid` and `export` say them (beside
+    `output`, as the user named it)."""
+    if info["tile"] is None:
+        return f"{output} and {Path(info['image']).name}"
+    skipped = f", {info['skipped']} all unknown left out" if info["skipped"] else ""
+    return (
+        f"{len(info['tiles'])} tile(s) of up to {info['tile']} x {info['tile']} cells"
+        f"{skipped}, listed in {output.with_name(Path(info['path']).name)}"
+    )
 
 
 def _holders_text(holders: list[dict[str, Any]]) -> str:
@@ -154,14 +166,15 @@ def _output_option(text: str) -> Any:
 @click.argument("mission")
 @_output_option(
     "The file to write: .g2o for a pose graph, .tum or .kitti for its trajectory, "
-    ".ply or .pcd for a point cloud; with --format bag, the ROS 2 bag's new folder."
+    ".ply or .pcd for a point cloud, .yaml for a nav2 map (the PGM beside it); with "
+    "--format bag, the ROS 2 bag's new folder."
 )
 @click.option(
     "--format",
     "fmt",
     type=click.Choice(EXPORT_FORMATS),
     help="The format to write (default: by the extension; needed for .txt and for bag, "
-    "a ROS 2 bag in MCAP of the poses, path and points).",
+    "a ROS 2 bag in MCAP of the poses, path and points; .yaml means grid, a nav2 map).",
 )
 @frame_option("Write a graph's poses")
 @json_option
@@ -171,7 +184,8 @@ def export_map(
 ) -> None:
     """Write MISSION to a file: a graph as g2o (2D when it lies in the plane),
     its poses as a TUM or KITTI trajectory, a point cloud as binary PLY (or PCD),
-    poses, path, points and grid as a ROS 2 bag (MCAP)."""
+    poses, path, points and grid as a ROS 2 bag (MCAP), its occupancy grid (stored,
+    or cast from its laser scans as `mapctl grid` does) as a nav2 map."""
     from mapctl import render
 
     info = session.call(
@@ -181,9 +195,16 @@ def export_map(
         render.emit_json(info)
         return
     if info["format"] == "bag":
-        grid = f", a grid of {info['cells']:,} cells" if info["cells"] else ""
+        grid = f", a grid of {info['grid_cells']:,} cells" if info["grid_cells"] else ""
         what = (
             f"{info['poses']} poses, {info['points']} points{grid} on {', '.join(info['topics'])}"
+        )
+    elif info["format"] == "grid":
+        cells = info["cells"]
+        what = (
+            f"a nav2 map of {info['width']} x {info['height']} cells of {info['resolution']} m, "
+            f"image {Path(info['image']).name} ({cells['occupied']} occupied, "
+            f"{cells['free']} free, {cells['unknown']} unknown)"
         )
     elif info["format"] == "g2o":
         what = f"{info['vertices']} vertices, {info['edges']} edges"
@@ -307,7 +328,10 @@ def plot(
 
 
 @click.command("grid")
-@_output_option("The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm).")
+@_output_option(
+    "The nav2 map YAML to write; the PGM image goes beside it (same name, .pgm). With --tile, "
+    "NAME.yaml names the tiles and their index, NAME.tiles.yaml."
+)
 @missions_option("Cast the scans of", "every mission held here with laser scans")
 @_bbox_option("The grid covers this box's x and y (default: every scan's rays).")
 @click.option(
@@ -316,7 +340,14 @@ def plot(
     default=None,
     help="The side of a cell, in metres (scans: 0.05 by default; a stored grid keeps its own).",
 )
-@frame_option("Cast the scans")
+@frame_option("Cast the scans (or write the stored grids)")
+@click.option(
+    "--tile",
+    type=click.IntRange(min=1),
+    metavar="CELLS",
+    help="Cut the map into nav2 maps of at most CELLS x CELLS cells, NAME_r{row}_c{col}.yaml "
+    "(row 0 the bottom), skipping tiles all unknown, listed in NAME.tiles.yaml.",
+)
 @json_option
 @pass_session
 def grid(
@@ -326,6 +357,7 @@ def grid(
     bbox: tuple[float, ...] | None,
     resolution: float | None,
     frame: str,
+    tile: int | None,
     as_json: bool,
 ) -> None:
     """Write an occupancy grid of laser missions, or the stored grids of grid
@@ -337,7 +369,8 @@ def grid(
     65 % of the rays reaching it is occupied, in fewer than 25 % free. Several
     missions share one grid in the world frame (`mapctl align`). A stored
     grid's cells (a bag's occupancy grid) are written as they are: at least
-    65 occupied, below 25 free.
+    65 occupied, below 25 free; a grid turned at its origin, or placed in the
+    world frame (a `frames` row), is resampled along the frame's axes.
     """
     from mapctl import render
 
@@ -348,6 +381,7 @@ def grid(
         bbox=list(bbox) if bbox else None,
         resolution=resolution,
         frame=frame,
+        tile=tile,
     )
     if as_json:
         render.emit_json(info)
@@ -355,7 +389,7 @@ def grid(
     cells = info["cells"]
     source = f"{info['scans']} scans of" if info["scans"] else "the stored grid of"
     render.line(
-        f"wrote {output} and {Path(info['image']).name}: {info['width']} x {info['height']} "
+        f"wrote {_grid_files(output, info)}: {info['width']} x {info['height']} "
         f"cells of {info['resolution']} m from {source} "
         f"{', '.join(info['missions'])} ({cells['occupied']} occupied, {cells['free']} free, "
         f"{cells['unknown']} unknown) in {info['seconds']:.2f} s"

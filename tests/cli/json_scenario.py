@@ -118,6 +118,8 @@ def _maps(out: Outputs, repo: Path, root: Path) -> None:
     out.run(("init",), str(laser), "--name", "robot-l")
     out.run(("import",), str(LASER_LOG), repo=laser)
     out.run(("grid",), "-o", str(root / "head.yaml"), "--resolution", "0.1", repo=laser)
+    out.run(("grid",), "-o", str(root / "big.yaml"), "--tile", "64", repo=laser)
+    out.run(("export",), "intel-head", "-o", str(root / "head-export.yaml"), repo=laser)
 
 
 def run_secure(out: Outputs, root: Path) -> None:

@@ -169,7 +169,7 @@ class TestGrid:
         assert "not both; choose one kind with -m" in mixed.err
         world = mapctl.main("grid", "-o", out, "-m", "run-map", "--frame", "world")
         assert world.code == EXIT_USAGE
-        assert "in their own frame only" in world.err
+        assert "has no place in the world frame yet" in world.err
 
 
 class TestExport:
@@ -184,7 +184,7 @@ class TestExport:
             "frame": "mission",
             "poses": 30,
             "points": 0,
-            "cells": 0,
+            "grid_cells": 0,
             "time": "timestamp",
             "topics": ["/run_odom/pose", "/run_odom/path"],
         }
@@ -209,7 +209,11 @@ class TestExport:
         out = tmp_path / "out"
         info = mapctl.json("export", "run-map", "-o", str(out), "--format", "bag")
         cells = room_cells()  # 300 x 200: two tiles wide
-        assert (info["cells"], info["poses"], info["topics"]) == (cells.size, 0, ["/run_map/map"])
+        assert (info["grid_cells"], info["poses"], info["topics"]) == (
+            cells.size,
+            0,
+            ["/run_map/map"],
+        )
         ((ns, grid),) = read_back(out)["/run_map/map"]
         assert grid.header.frame_id == "run-map/map"
         assert ns == 1_700_000_000_400_000_000  # the stored grid's stamp, as recorded

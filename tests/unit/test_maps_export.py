@@ -160,7 +160,9 @@ class TestG2oRoundTrip:
             await ops.export_map("nope", str(tmp_path / "x.g2o"))
         with pytest.raises(UsageError, match="no point cloud"):
             await ops.export_map("intel", str(tmp_path / "x.ply"))
-        with pytest.raises(UsageError, match=r"pass --format \(g2o\|tum\|kitti\|ply\|pcd\|bag\)"):
+        with pytest.raises(
+            UsageError, match=r"pass --format \(g2o\|tum\|kitti\|ply\|pcd\|bag\|grid\)"
+        ):
             await ops.export_map("intel", str(tmp_path / "x.csv"))
 
 

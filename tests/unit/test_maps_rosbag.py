@@ -31,11 +31,11 @@ from mapbench.bags import (
     room_cells,
     write_bag,
 )
+from tests.unit.grid_bags import write_grid_bag
 
 pytest.importorskip("rosbags")
 
 T0 = 1_700_000_000.0
-OCCUPANCY = "nav_msgs/msg/OccupancyGrid"
 
 
 def bag_at(tmp_path: Path, storage: str, **options: int | bool) -> Path:
@@ -251,19 +251,16 @@ def test_the_last_occupancy_grid_becomes_a_grid_mission(tmp_path: Path, storage:
     assert [s.name for s in read_bag(path, ["/map"])] == ["run-map"]
 
 
-def test_a_rotated_grid_is_refused_naming_its_topic(tmp_path: Path) -> None:
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    build = Messages(store, ros1=False)
-    turned = (1.0, 2.0, 0.0, 0.0, 0.0, math.sin(0.25), math.cos(0.25))  # 30 degrees of yaw
-    with Writer(tmp_path / "turned", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        topic = writer.add_connection("/floor/map", OCCUPANCY, typestore=store)
-        message = build.grid(1, room_cells(4, 3), turned)
-        writer.write(topic, 1, store.serialize_cdr(message, OCCUPANCY))
-    with pytest.raises(MapImportError, match=r"topic /floor/map, message 0 .* rotated"):
-        read_bag(tmp_path / "turned")
+def test_a_turned_grid_keeps_its_yaw_and_a_tilted_one_is_refused(tmp_path: Path) -> None:
+    turned = (1.0, 2.0, 0.0, 0.0, 0.0, math.sin(0.25), math.cos(0.25))  # 0.5 rad of yaw
+    write_grid_bag(tmp_path / "turned", room_cells(4, 3), turned, "/floor/map")
+    (grid,) = read_bag(tmp_path / "turned")
+    assert isinstance(grid, OccupancyGrid)
+    assert (grid.x0, grid.y0, grid.yaw) == (1.0, 2.0, pytest.approx(0.5, abs=1e-12))
+    tilted = (1.0, 2.0, 0.0, math.sin(0.1), 0.0, 0.0, math.cos(0.1))
+    write_grid_bag(tmp_path / "tilted", room_cells(4, 3), tilted, "/floor/map")
+    with pytest.raises(MapImportError, match=r"topic /floor/map, message 0 .* tilted"):
+        read_bag(tmp_path / "tilted")
 
 
 class TestErrors:

@@ -125,7 +125,14 @@ class TestEvoReadsWhatWeWrite:
 class TestFormats:
     @pytest.mark.parametrize(
         ("name", "fmt"),
-        [("a.tum", "tum"), ("a.KITTI", "kitti"), ("a.g2o", "g2o"), ("a.ply", "ply")],
+        [
+            ("a.tum", "tum"),
+            ("a.KITTI", "kitti"),
+            ("a.g2o", "g2o"),
+            ("a.ply", "ply"),
+            ("a.yaml", "grid"),  # nav2's map YAML, its PGM beside it
+            ("a.YML", "grid"),
+        ],
     )
     def test_the_extension_names_the_format(self, name: str, fmt: str) -> None:
         assert export_format(Path(name)) == fmt
@@ -138,8 +145,8 @@ class TestFormats:
     def test_an_unknown_extension_or_format_is_refused(self) -> None:
         with pytest.raises(UsageError, match="pass --format"):
             export_format(Path("poses.csv"))
-        with pytest.raises(UsageError, match="unknown format 'grid'"):
-            export_format(Path("poses.pgm"), "grid")
+        with pytest.raises(UsageError, match="unknown format 'png'"):
+            export_format(Path("poses.png"), "png")
         with pytest.raises(UsageError, match="pass --format"):
             export_format(Path("poses.bag"))  # a ROS 1 bag's name: we write ROS 2 folders
         with pytest.raises(UsageError, match=r"must end in \.ply"):

@@ -209,7 +209,7 @@ class Frame(_message.Message):
     def __init__(self, mission: _Optional[str] = ..., frame: _Optional[str] = ..., transform: _Optional[_Union[Pose3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., anchor: _Optional[str] = ..., linked: _Optional[_Iterable[str]] = ..., edges: _Optional[int] = ..., duplicate_of: _Optional[str] = ..., content: _Optional[str] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., mission_chunk: _Optional[str] = ...) -> None: ...
 
 class GridTile(_message.Message):
-    __slots__ = ("mission", "resolution", "x", "y", "width", "height", "cells", "bbox", "stamp")
+    __slots__ = ("mission", "resolution", "x", "y", "width", "height", "cells", "bbox", "stamp", "yaw")
     MISSION_FIELD_NUMBER: _ClassVar[int]
     RESOLUTION_FIELD_NUMBER: _ClassVar[int]
     X_FIELD_NUMBER: _ClassVar[int]
@@ -219,6 +219,7 @@ class GridTile(_message.Message):
     CELLS_FIELD_NUMBER: _ClassVar[int]
     BBOX_FIELD_NUMBER: _ClassVar[int]
     STAMP_FIELD_NUMBER: _ClassVar[int]
+    YAW_FIELD_NUMBER: _ClassVar[int]
     mission: str
     resolution: float
     x: float
@@ -228,4 +229,5 @@ class GridTile(_message.Message):
     cells: bytes
     bbox: Box3
     stamp: float
-    def __init__(self, mission: _Optional[str] = ..., resolution: _Optional[float] = ..., x: _Optional[float] = ..., y: _Optional[float] = ..., width: _Optional[int] = ..., height: _Optional[int] = ..., cells: _Optional[bytes] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., stamp: _Optional[float] = ...) -> None: ...
+    yaw: float
+    def __init__(self, mission: _Optional[str] = ..., resolution: _Optional[float] = ..., x: _Optional[float] = ..., y: _Optional[float] = ..., width: _Optional[int] = ..., height: _Optional[int] = ..., cells: _Optional[bytes] = ..., bbox: _Optional[_Union[Box3, _Mapping]] = ..., stamp: _Optional[float] = ..., yaw: _Optional[float] = ...) -> None: ...
