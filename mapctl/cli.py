@@ -14,6 +14,7 @@ from mapctl.commands import (
     bench,
     demo,
     history,
+    imports,
     lookup,
     maps,
     peer,
@@ -54,7 +55,20 @@ def cli(ctx: click.Context, path: Path, view_name: str, verbose: bool) -> None:
     ctx.call_on_close(session.close)
 
 
-for module in (repo, view, history, peer, security, lookup, watch, maps, align, bench, demo):
+for module in (
+    repo,
+    view,
+    history,
+    peer,
+    security,
+    lookup,
+    watch,
+    imports,
+    maps,
+    align,
+    bench,
+    demo,
+):
     module.register(cli)
 completion.register(cli)  # last: it attaches TAB completion to the commands above
 

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
-from mapapi.maps.operations import absolute, box_json, tile_json
+from mapapi.maps.op_parts import absolute, box_json, tile_json
 from mapapi.service.ops import Operation
 
 if TYPE_CHECKING:

@@ -26,22 +26,21 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 from collections.abc import Callable, Mapping
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from mapapi.core.errors import RequestTimeout
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.lookup.spatial import BBox
 from mapapi.maps.grid_ops import GridOperations
+from mapapi.maps.import_ops import ImportOperations
+from mapapi.maps.op_parts import absolute, box_json, tile_json
 from mapapi.maps.schema import CLOUDS, FRAMES, MISSIONS
 from mapapi.service.ops import Operation
 from mapapi.service.transfer_ops import online, placed_json
 
 if TYPE_CHECKING:
     from mapapi.maps.stored import MissionInfo
-    from mapapi.maps.tiles import TileChunks
     from mapapi.net.messages import Member
     from mapapi.service.peer import Peer
 
@@ -52,22 +51,6 @@ LOAD_PARALLEL = 4
 """Chunks `load_bbox` joins at once."""
 JOIN_ATTEMPTS = 3
 """Times `load_bbox` asks for a chunk whose state is late (each waits `PROPOSE_TIMEOUT`)."""
-
-
-def box_json(box: BBox | None) -> list[float] | None:
-    """A box as JSON: its six numbers, or null."""
-    return None if box is None else list(box.as_tuple())
-
-
-def tile_json(tile: TileChunks) -> Json:
-    """One spatial tile of a mission: its box, chunks and counts."""
-    return {
-        "bbox": box_json(tile.bbox),
-        "vertices": tile.vertices,
-        "edges": tile.edges,
-        "vertex_count": tile.vertex_count,
-        "edge_count": tile.edge_count,
-    }
 
 
 def member_json(member: Member) -> Json:
@@ -83,8 +66,6 @@ class MapOperations:
     """Map operations over one peer (see the module docstring)."""
 
     def __init__(self, peer: Peer, grids: GridOperations | None = None) -> None:
-        from mapapi.maps.import_ops import ImportOperations
-
         self.peer = peer
         self.imports = ImportOperations(peer)
         self.grids = grids or GridOperations(peer)  # writes `export`'s nav2 maps
@@ -315,11 +296,6 @@ class MapOperations:
         none runs)."""
         done, total = self._loads.get(_load_key(bbox, table), (0, 0))
         return {"loaded": done, "of": total}
-
-
-def absolute(path: str) -> Path:
-    """`path` from the caller's folder (the CLI sends absolute paths)."""
-    return Path(os.path.abspath(os.path.expanduser(path)))
 
 
 def _remote_json(name: str, box: BBox, holders: list[Json]) -> Json:

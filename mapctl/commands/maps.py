@@ -1,4 +1,5 @@
-"""Missions: `import`, `export`, `missions`, `plot` (the application layer, DESIGN §2)."""
+"""Missions: `export`, `missions`, `plot`, `grid` (the application layer, DESIGN §2;
+`import` is `imports`')."""
 
 from __future__ import annotations
 
@@ -9,16 +10,17 @@ import click
 
 from mapctl.session import Session, json_option, pass_session
 
-FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosbag")
 EXPORT_FORMATS = ("g2o", "tum", "kitti", "ply", "pcd", "bag", "grid")  # maps.jobs.EXPORT_FORMATS
 UP_CHOICES = ("auto", "x", "y", "z", "-x", "-y", "-z")  # mapapi.maps.view_axes.UP_CHOICES
 
 
-def _bbox_text(box: list[float] | None) -> str:
+def bbox_text(box: list[float] | None) -> str:
+    """A mission's box to the metre, or "-"."""
     return "-" if box is None else " ".join(str(round(v)) for v in box)  # to the metre
 
 
-def _size_text(mission: dict[str, Any]) -> str:
+def size_text(mission: dict[str, Any]) -> str:
+    """A mission's size as `missions` and `import` list it."""
     if mission["vertices"] is None:
         return "?"  # held elsewhere: only its box is known here
     if "grids" in (mission.get("chunks") or {}):
@@ -49,99 +51,6 @@ def _grid_files(output: Path, info: dict[str, Any]) -> str:
 
 def _holders_text(holders: list[dict[str, Any]]) -> str:
     return ", ".join(h["name"] or h["id"][:8] for h in holders) or "?"
-
-
-@click.command("import")
-@click.argument("file", type=click.Path(exists=True, path_type=Path))
-@click.option(
-    "--format",
-    "fmt",
-    type=click.Choice(FORMATS),
-    help="The file's format (default: by extension; a folder is a ROS 2 bag when it holds "
-    "metadata.yaml, a DGS set of <n>.g2o files or a Kimera set; a .txt file GTSAM landmark "
-    "text if its first record is one).",
-)
-@click.option(
-    "--mission",
-    help="The mission's name (default: the file's); a prefix for a Kimera set or for "
-    "per-robot g2o (default robot-).",
-)
-@click.option("--robot", help="The robot's name (sources of one mission only).")
-@click.option(
-    "--voxel",
-    type=click.FloatRange(0),
-    help="Point clouds: keep one point per voxel of this side in metres; 0 keeps all "
-    "[default: 0.05; for a bag's clouds 0].",
-)
-@click.option(
-    "--topics",
-    "topics",
-    multiple=True,
-    metavar="TOPIC[,TOPIC...]",
-    help="ROS bags: read these topics only (repeat, or separate with commas; default: every "
-    "pose, path, odometry and point cloud topic).",
-)
-@click.option(
-    "--scan-match",
-    is_flag=True,
-    help="Laser logs: correct the odometry by matching each scan to those before it, so "
-    "walls stay where they are (the Intel log: about 40 s).",
-)
-@json_option
-@pass_session
-def import_map(
-    session: Session,
-    file: Path,
-    fmt: str | None,
-    mission: str | None,
-    robot: str | None,
-    voxel: float | None,
-    topics: tuple[str, ...],
-    scan_match: bool,
-    as_json: bool,
-) -> None:
-    """Import a map FILE: g2o pose graph (one mission per robot when its ids are
-    GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
-    cloud, CARMEN laser log (.clf, .clf.bz2), ROS bag (.bag, or a ROS 2 bag's
-    folder: one mission per pose, point cloud or occupancy grid topic; clouds
-    placed through /tf in the odometry's frame).
-
-    Each mission is one commit, in new chunks (one per table); a malformed file
-    stops with the line it failed on, and nothing is committed.
-    """
-    from mapctl import render
-
-    path = str(file.resolve())
-    chosen = [t for text in topics for t in text.split(",") if t]
-    args: dict[str, Any] = {"path": path, "fmt": fmt, "mission": mission, "robot": robot}
-    args |= {"voxel": voxel, "topics": chosen or None, "scan_match": scan_match}
-    with render.transfer(f"importing {file.name}") as show:
-        info = session.call_with_progress(
-            "import_map",
-            args,
-            ("import_progress", {"path": path}),
-            lambda state: show(state["done"], state["total"]),
-        )
-    if as_json:
-        render.emit_json(info)
-        return
-    rows = [
-        (m["name"], m["robot"] or "-", _size_text(m), _bbox_text(m["bbox"]), m["commit"][:8])
-        for m in info["missions"]
-    ]
-    title = f"imported {file.name} ({info['format']})"
-    render.table(title, ["name", "robot", "size", "bbox", "commit"], rows)
-    rate = f" ({info['elements_per_s']:,} elements/s)" if info["elements"] else ""
-    render.line(f"{len(info['missions'])} mission(s) in {info['seconds']:.2f} s{rate}")
-    for m in info["missions"]:
-        if m.get("scan_match"):
-            matched = m["scan_match"]
-            render.line(
-                f"{m['name']}: {matched['keyframes']:,} scans matched; the odometry had drifted "
-                f"up to {matched['largest']:.2f} m"
-            )
-        for warning in m["warnings"]:
-            render.warning(f"{m['name']}: {warning}")
 
 
 def frame_option(what: str, where: str = "in each mission's own frame, or in") -> Any:
@@ -242,8 +151,8 @@ def missions(session: Session, swarm: bool, frame: str, as_json: bool) -> None:
         (
             m["name"],
             m["robot"] or "-",
-            _size_text(m),
-            _bbox_text(m["bbox"]),
+            size_text(m),
+            bbox_text(m["bbox"]),
             _holders_text(m["holders"]),
             "yes" if m["held"] else "no",
         )[: len(columns)]
@@ -400,5 +309,5 @@ def grid(
 
 def register(cli: click.Group) -> None:
     """Add this module's commands to `cli`."""
-    for command in (import_map, export_map, missions, plot, grid):
+    for command in (export_map, missions, plot, grid):
         cli.add_command(command)
