@@ -38,6 +38,7 @@ import numpy.typing as npt
 
 from mapapi.maps.carmen import Pose2, relative_se2
 from mapapi.maps.laser import Correction, LaserMission
+from mapapi.maps.plane import Placement
 from mapapi.maps.se3 import from_se2, yaw
 
 Array = npt.NDArray[np.float64]
@@ -213,10 +214,7 @@ def _best(
 
 def place(local: Array, pose: Array) -> Array:
     """The (m, 2) points `local`, given in the frame of `pose`, in the pose's frame."""
-    cos, sin = math.cos(pose[2]), math.sin(pose[2])
-    x = pose[0] + cos * local[:, 0] - sin * local[:, 1]
-    y = pose[1] + sin * local[:, 0] + cos * local[:, 1]
-    return np.stack([x, y], axis=1)
+    return Placement(float(pose[0]), float(pose[1]), float(pose[2])).apply(local)
 
 
 def seen_from(points: Array, pose: Array) -> Array:
