@@ -43,6 +43,7 @@ from mapapi.core.ids import ChunkId, PeerId
 from mapapi.net.codec import Ping, Pong
 from mapapi.net.messages import GroupChanged, GroupJoin, GroupLeave
 from mapapi.net.rpc import Request, Rpc
+from mapapi.store.offload import off_loop
 from mapapi.swarm.chain_check import refuse_to_hand_on
 from mapapi.swarm.failure import REMOVE_AFTER
 from mapapi.swarm.group_state import AddressFn
@@ -349,7 +350,11 @@ class GroupMembers:
         A member that comes back before is forgotten from the count.
         """
         removed: set[PeerId] = set()
-        for chunk in self.groups.led():
+        led = self.groups.led()
+        # Every led chunk's factor read in one worker: a read per chunk on the loop waits
+        # for the interpreter lock each time a busy thread holds it (5 ms), hundreds of times.
+        factors = await off_loop(self.groups.store, lambda: {c: self.factor(c) for c in led})
+        for chunk in led:
             members = self.groups.members(chunk)
             dead = [p for p in members if is_dead(p)]
             for peer in dead:
@@ -366,11 +371,11 @@ class GroupMembers:
                 # shrink this leader's view of the configuration (a change takes
                 # effect once appended), and what a minority's errors name
                 continue
-            if next_change(config, wanted, self.factor(chunk), me, ready) is None:
+            if next_change(config, wanted, factors[chunk], me, ready) is None:
                 continue  # nothing to do, or only a learner to promote that lags
             try:
                 async with self._changing.setdefault(chunk, asyncio.Lock()):
-                    await change_nodes(self.groups, chunk, wanted, self.factor(chunk))
+                    await change_nodes(self.groups, chunk, wanted, factors[chunk])
             except (NotChunkLeader, RequestTimeout) as exc:  # the next round tries again
                 log.warning("chunk %s: dead members not removed yet: %s", chunk.short, exc)
                 continue

@@ -26,6 +26,7 @@ from mapapi.core.errors import MapError
 from mapapi.core.ids import ChunkId, CommitId
 from mapapi.core.proposal import Proposal, TxDecision
 from mapapi.store.base import TxRow
+from mapapi.store.offload import off_loop
 from mapapi.swarm.log_commit import LogCommits
 
 log = logging.getLogger(__name__)
@@ -74,11 +75,14 @@ class TxRecovery:
         waited `after` seconds since this peer first saw it."""
         now = asyncio.get_running_loop().time()
         store = self.commits.groups.store
-        waiting = {
-            (chunk, cid): row
-            for chunk in self.commits.groups.led()
-            for cid, row in store.raft_tx_prepared(chunk)
-        }
+        led = self.commits.groups.led()
+
+        def prepared() -> dict[tuple[ChunkId, CommitId], TxRow]:
+            return {(c, cid): row for c in led for cid, row in store.raft_tx_prepared(c)}
+
+        # in a worker: a read per led chunk on the loop would wait for the interpreter
+        # lock after each one while another thread computes (see `GroupMembers.reap`)
+        waiting = await off_loop(store, prepared)
         self._seen = {key: self._seen.get(key, now) for key in waiting}
         for (chunk, cid), row in waiting.items():
             if now - self._seen[(chunk, cid)] < self.after:
