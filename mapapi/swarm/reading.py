@@ -10,6 +10,7 @@ index when it keeps one, and filter the table's rows otherwise.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -121,7 +122,16 @@ async def _caught_up(swarm: Swarm, chunks: Sequence[ChunkId], time: int) -> int:
     """`time`, or the newest clock of `chunks` once caught up with their leaders."""
     for each in chunks:
         time = max(time, await swarm.reads.caught_up(each))
+        await _turn()
     return time
+
+
+async def _turn() -> None:
+    """Let the loop run others' work between two chunks: a chunk this peer leads
+    alone is caught up or floored without waiting, so a mission of hundreds of
+    chunks would otherwise be done in one step of the loop, each of its reads
+    there waiting for the interpreter lock while another thread computes."""
+    await asyncio.sleep(0)
 
 
 async def _item_chunk(store: ReplicaStore, swarm: Swarm, item_id: ItemId) -> ChunkId | None:
@@ -191,6 +201,7 @@ async def labelled_readable(
     time = await _caught_up(swarm, chunks, 0)
     for chunk in chunks:
         await swarm.reads.read_at(chunk, time)
+        await _turn()
     return time
 
 
