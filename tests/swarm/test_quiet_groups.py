@@ -5,6 +5,7 @@ not heartbeat each of them; a proposal wakes a group; followers whose leader's p
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 from mapapi.core.ids import ChunkId, PeerId
 from mapapi.testing import until
@@ -24,7 +25,25 @@ async def quiet_groups(world: World, dead: set[PeerId]) -> list[Node]:
     for chunk in CHUNKS:
         await propose_all(await leader_of(nodes, chunk), chunk, [b"a"])
     await until(lambda: all_quiet(nodes), timeout=10.0)  # no message marks going quiet
+    await until(sent_nothing_for(nodes, 3), timeout=10.0)
     return nodes
+
+
+def sent_nothing_for(nodes: list[Node], ticks: int) -> Callable[[], bool]:
+    """A condition: no node has sent a message for `ticks` ticks. A group marks itself
+    quiet when it handles its last heartbeat, and its reply may still be on its way
+    out (flushed with the next batch) on a loaded machine."""
+    last: list[int] = []
+    since = time.monotonic()
+
+    def quiet() -> bool:
+        nonlocal last, since
+        now = [n.groups.mail.messages_sent for n in nodes]
+        if now != last:
+            last, since = now, time.monotonic()
+        return time.monotonic() - since > ticks * TICK
+
+    return quiet
 
 
 async def test_idle_groups_send_nothing_until_a_proposal_wakes_one(world: World) -> None:
