@@ -352,7 +352,7 @@ class GroupMembers:
         removed: set[PeerId] = set()
         led = self.groups.led()
         # Every led chunk's factor read in one worker: a read per chunk on the loop waits
-        # for the interpreter lock each time a busy thread holds it (5 ms), hundreds of times.
+        # for the interpreter lock (up to the switch interval) while a thread computes.
         factors = await off_loop(self.groups.store, lambda: {c: self.factor(c) for c in led})
         for chunk in led:
             members = self.groups.members(chunk)
