@@ -230,8 +230,8 @@ def _planar(row: Array) -> Pose2:
 
 def compose(a: Array, b: Pose2) -> Array:
     """The planar pose `b`, given in the frame of `a`, in `a`'s frame."""
-    cos, sin = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + cos * b[0] - sin * b[1], a[1] + sin * b[0] + cos * b[1], a[2] + b[2]])
+    ((x, y),) = place(np.array([b[:2]]), a)
+    return np.array([x, y, a[2] + b[2]])
 
 
 def match_mission(laser: LaserMission, progress: Progress | None = None) -> Correction:
