@@ -33,6 +33,14 @@ pytestmark = pytest.mark.slow
 DEMO_TIMEOUT = 180.0
 
 
+def _interruptible() -> None:
+    """In the demo's child, before it runs: SIGINT as a terminal's Ctrl-C would
+    find it. A shell that starts the suite in the background (`make test &`) hands
+    every child SIGINT ignored, and Python then keeps it ignored: the demo would
+    never see the interrupt this test sends, and run to its end."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def alive(pid: int) -> bool:
     """Whether process `pid` exists (a zombie of this test's children counts as gone)."""
     try:
@@ -186,6 +194,7 @@ def test_an_interrupted_demo_stops_every_peer_it_started(tmp_path: Path, signum:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_interruptible,
     ) as demo:
 
         def read() -> None:
