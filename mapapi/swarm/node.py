@@ -357,7 +357,7 @@ class Swarm:
     async def rejoin(self) -> list[ChunkId]:
         """The chunks this peer shares, their groups resumed at `start`: registered
         again, caught up with their leaders at once, their chains compared."""
-        back = self.replicator.shared()
+        back = await self.replicator.shared()
         await asyncio.gather(*(self._back(chunk) for chunk in back))  # each waits for its leader
         await self.chains.compare(back)
         return back

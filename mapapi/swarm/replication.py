@@ -223,14 +223,20 @@ class Replicator:
         if self.places is not None:
             await self.places.withdraw(chunk)
 
-    def shared(self) -> list[ChunkId]:
+    async def shared(self) -> list[ChunkId]:
         """The chunks this peer holds with others (a restarted peer's groups resume
         by themselves; their chains are compared at once)."""
-        return [
-            c
-            for c in self.store.chunk_ids()
-            if self.holds(c) and [p for p in self.store.holders(c) if p != self.me]
-        ]
+
+        def read() -> list[ChunkId]:
+            return [
+                c
+                for c in self.store.chunk_ids()
+                if self.holds(c) and [p for p in self.store.holders(c) if p != self.me]
+            ]
+
+        # In one worker: two reads per chunk on the loop would each wait for the
+        # interpreter lock behind a busy thread, hundreds of times at start.
+        return await off_loop(self.store, read)
 
     # -- finding holders -------------------------------------------------------------------
     def rpc_holders_query(self, req: Request) -> Holders:
