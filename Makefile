@@ -28,7 +28,7 @@ $(DEMO_STAMP): pyproject.toml | $(PY)
 
 # The test set holds the demo set, so it marks both as installed.
 $(TEST_STAMP): pyproject.toml | $(PY)
-	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, hypothesis, ruff, mypy, grpcio-tools, py-spy, evo), matplotlib, open3d-cpu for point clouds, gtsam for registration and rosbags for ROS bags"
+	@echo "==> installing mapapi and what the tests need into $(VENV): the test tools (the 'dev' extra: pytest, pytest-xdist, hypothesis, ruff, mypy, grpcio-tools, py-spy, evo), matplotlib, open3d-cpu for point clouds, gtsam for registration and rosbags for ROS bags"
 	@$(PY) -m pip install --quiet -e '.[dev,plot,pointcloud,registration,rosbag]'
 	@bash scripts/ensure-syslibs.sh
 	@touch $@ $(DEMO_STAMP)
@@ -42,9 +42,14 @@ install: $(TEST_STAMP)
 bytecode: | $(PY)
 	@$(PY) -m compileall -q -j 0 mapapi mapctl mapbench
 
+# Two test files at a time (pytest-xdist, one file per worker so that a file's
+# shared fixtures run once): most tests wait on processes and sockets, and one at
+# a time left a core idle. The tests marked `alone` measure the machine's timing
+# (a daemon's loop lag under load), so they run afterwards with nothing beside them.
 test: $(TEST_STAMP) bytecode
-	@echo "==> running the whole test suite: about 13 minutes on 2 cores (make check: the quick part, about a minute and a half)"
-	$(PY) -m pytest --durations=10
+	@echo "==> running the whole test suite: about 12 minutes on 2 cores, two test files at a time, then the timing tests alone (make check: the quick part, about a minute and a half)"
+	$(PY) -m pytest -n 2 --dist loadfile -m "not alone" --durations=10
+	$(PY) -m pytest -m alone --durations=3
 
 check: $(TEST_STAMP)
 	@echo "==> running the quick tests ($(CHECK_TESTS), not the ones marked slow; 100 simulator seeds per mode, of make test's 300 + 200): about a minute on 2 cores; make test runs them all"

@@ -16,7 +16,9 @@ import pytest
 from mapbench.stall import measure_stall
 from tests.multiproc.conftest import mapctl
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+# `alone`: its bound is on the daemon's timing, which other tests' processes on the
+# same cores would move; `make test` runs it after them.
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(300)]
 
 ITEMS = 100_000
 LOAD_ITEMS = 20_000

@@ -56,8 +56,14 @@ class TestCheck:
 
     def test_test_runs_the_whole_suite_which_ci_runs(self) -> None:
         _, recipe = rule("test")
-        (pytest,) = [line for line in recipe if "pytest" in line]
-        assert "tests/" not in pytest  # no folder: pyproject's testpaths, all of them
+        together, alone = [line for line in recipe if "pytest" in line]
+        for line in (together, alone):
+            assert "tests/" not in line  # no folder: pyproject's testpaths, all of them
+        # every test runs in one of the two: the timing tests by themselves, after the rest
+        assert '-m "not alone"' in together
+        assert "-n 2" in together
+        assert "-m alone" in alone
+        assert "-n " not in alone
         assert "make test" in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 
