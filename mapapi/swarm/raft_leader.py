@@ -1,6 +1,7 @@
 """The leader's half of a Raft node: replication, commit, CheckQuorum and ReadIndex.
 
-Pure (DESIGN §13). `RaftNode` (in `raft.py`) inherits it; the split only keeps modules short.
+Pure (DESIGN §13). `RaftNode` (in `raft.py`) inherits it, through `Follower` (`raft_follower.py`);
+the split only keeps modules short.
 Citations as in `raft.py`.
 """
 
