@@ -69,6 +69,7 @@ class ImportOperations:
         voxel: float | None = None,
         topics: list[str] | None = None,
         scan_match: bool = False,
+        tf_frame: str | None = None,
     ) -> Json:
         """Import a map file or Kimera folder: parse it all (a laser log's
         trajectory scan-matched if `scan_match`), then one commit per mission;
@@ -86,8 +87,8 @@ class ImportOperations:
         self._imports[path] = (0, 0)
         try:
             read = partial(read_source, source, fmt, mission=mission, robot=robot, voxel=voxel)
-            read = partial(read, topics=topics or (), scan_match=scan_match, progress=report)
-            sources = await asyncio.to_thread(read)
+            read = partial(read, topics=topics or (), tf_frame=tf_frame, scan_match=scan_match)
+            sources = await asyncio.to_thread(read, progress=report)
             results = await import_missions(self.peer, sources, report)
         finally:
             self._imports.pop(path, None)

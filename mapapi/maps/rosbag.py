@@ -155,8 +155,14 @@ class _Bag:
         grid = OccupancyGrid(name, self.robot, frame, resolution, x, y, z, cells, stamp, yaw)
         self.grids[topic] = grid
 
-    def missions(self, voxel: float) -> list[MapSource]:
-        """The missions read, trajectories first, each in its frame."""
+    def missions(self, voxel: float, tf_frame: str | None = None) -> list[MapSource]:
+        """The missions read, trajectories first, each in its frame; the clouds
+        placed in `tf_frame`, by default the first odometry's frame (else the
+        first trajectory's).
+
+        Raises:
+            UsageError: `tf_frame` is in no transform and is no trajectory's frame.
+        """
         found: list[MapSource] = []
         frames = {}  # topic -> its trajectory's frame, without the mission's name
         for topic, track in self.trajectories.items():
@@ -168,6 +174,12 @@ class _Bag:
             found.append(track.graph)
         odometry = [t for t in frames if self.trajectories[t].odometry]
         target = frames[(odometry or list(frames))[0]] if frames else None
+        if tf_frame is not None:
+            known = self.tf.frames() | set(frames.values())
+            if tf_frame not in known:
+                named = ", ".join(sorted(known)) or "none"
+                raise UsageError(f"--tf-frame {tf_frame}: no transform names it (frames: {named})")
+            target = tf_frame
         for cloud in self.clouds.values():
             if (placed := self.cloud(cloud, target, voxel)) is not None:
                 found.append(placed)
@@ -205,6 +217,7 @@ def read_bag(
     robot: str = "",
     *,
     voxel: float = 0.0,
+    tf_frame: str | None = None,
     progress: Progress | None = None,
 ) -> list[MapSource]:
     """Read a ROS bag's pose, point cloud and occupancy grid topics as missions
@@ -215,6 +228,8 @@ def read_bag(
         mission: the prefix of every mission's name (default: the bag's name and `-`).
         robot: the robot of every mission.
         voxel: keep one point per voxel of this side in metres (open3d); 0 keeps all.
+        tf_frame: the frame the clouds are placed in (default: the first odometry
+            topic's frame, else the first pose topic's).
         progress: called with (messages read, messages in all).
 
     Raises:
@@ -222,7 +237,7 @@ def read_bag(
             is not a valid map value (naming the topic and the message's index on
             it: a tilted grid origin among them), or no supported topic with data.
         UsageError: rosbags is missing, or `topics` names a topic the bag lacks or
-            one of a type not imported.
+            one of a type not imported, or `tf_frame` is a frame no transform names.
     """
     path = Path(path)
     bag = _Bag(f"{bag_name(path)}-" if mission is None else mission, robot)
@@ -247,7 +262,7 @@ def read_bag(
                 progress(read, total)
     if progress is not None:
         progress(read, total)
-    found = bag.missions(voxel)
+    found = bag.missions(voxel, tf_frame)
     if not found:
         raise MapImportError(
             "no pose, point cloud or occupancy grid topic with data: nothing to import",

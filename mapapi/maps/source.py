@@ -69,6 +69,7 @@ def read_source(
     robot: str | None = None,
     voxel: float | None = None,
     topics: Sequence[str] = (),
+    tf_frame: str | None = None,
     scan_match: bool = False,
     progress: Progress | None = None,
 ) -> list[MapSource]:
@@ -82,6 +83,7 @@ def read_source(
         voxel: point clouds only: the voxel side in metres (0 keeps every
             point; default `DEFAULT_VOXEL`, and for a bag's clouds 0).
         topics: ROS bags only: the topics to read (default: every supported one).
+        tf_frame: ROS bags only: the frame its point clouds are placed in.
         scan_match: laser logs only: correct the odometry by the scans
             (`mapapi.maps.scan_match`).
         progress: called with (units read, units in all or 0 while unknown).
@@ -97,9 +99,20 @@ def read_source(
     if fmt not in FORMATS:
         raise UsageError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if fmt == ROSBAG:
-        return read_bag(path, topics, mission, robot or "", voxel=voxel or 0.0, progress=progress)
+        bag_voxel = voxel or 0.0  # a bag's clouds keep every point unless told
+        return read_bag(
+            path,
+            topics,
+            mission,
+            robot or "",
+            voxel=bag_voxel,
+            tf_frame=tf_frame,
+            progress=progress,
+        )
     if topics:
         raise UsageError("--topics applies to ROS bags only")
+    if tf_frame is not None:
+        raise UsageError("--tf-frame applies to ROS bags only")
     if scan_match and fmt != "carmen":
         raise UsageError("--scan-match applies to laser logs (carmen) only")
     if fmt in CLOUD_FORMATS:

@@ -137,6 +137,10 @@ class TfTree:
         else:
             link.add(stamp, pose)
 
+    def frames(self) -> set[str]:
+        """Every frame a transform named, as parent or child."""
+        return set(self._links) | {link.parent for link in self._links.values()}
+
     def parent(self, frame: str) -> str | None:
         """The frame's parent, None for a root or a frame TF never named."""
         link = self._links.get(frame)

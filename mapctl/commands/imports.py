@@ -44,6 +44,12 @@ FORMATS = ("g2o", "kimera-csv", "gtsam-landmarks", "ply", "pcd", "carmen", "rosb
     "pose, path, odometry and point cloud topic).",
 )
 @click.option(
+    "--tf-frame",
+    metavar="FRAME",
+    help="ROS bags: place the point clouds in this TF frame (default: the first odometry "
+    "topic's frame, else the first pose topic's).",
+)
+@click.option(
     "--scan-match",
     is_flag=True,
     help="Laser logs: correct the odometry by matching each scan to those before it, so "
@@ -59,6 +65,7 @@ def import_map(
     robot: str | None,
     voxel: float | None,
     topics: tuple[str, ...],
+    tf_frame: str | None,
     scan_match: bool,
     as_json: bool,
 ) -> None:
@@ -77,6 +84,8 @@ def import_map(
     chosen = [t for text in topics for t in text.split(",") if t]
     args: dict[str, Any] = {"path": path, "fmt": fmt, "mission": mission, "robot": robot}
     args |= {"voxel": voxel, "topics": chosen or None, "scan_match": scan_match}
+    if tf_frame is not None:
+        args["tf_frame"] = tf_frame
     with render.transfer(f"importing {file.name}") as show:
         info = session.call_with_progress(
             "import_map",

@@ -102,6 +102,29 @@ class TestTf:
             boxes[bag.name] = clouds[0]["bbox"]
         assert boxes["sensor"] == pytest.approx(boxes["plain"], abs=1e-4)
 
+    def test_tf_frame_places_the_clouds_and_is_refused_where_it_does_not_apply(
+        self, mapctl: Mapctl, tmp_path: Path
+    ) -> None:
+        points = np.array([[1.0, 2.0, 3.0]], np.float32)
+        moves = [(1, (4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))]
+        bag = tf_bag(tmp_path / "run", moves, [(1, "lidar", points)])
+        boxes = {}
+        for frame in ("odom", "lidar"):
+            info = mapctl.json("import", str(bag), "--tf-frame", frame, "--mission", f"{frame}-")
+            (cloud,) = [m for m in info["missions"] if m["points"]]
+            boxes[frame] = cloud["bbox"]
+        # the lidar sits 0.5 m ahead of base_link and 0.3 m up, base_link 4 m along odom's x
+        assert boxes["lidar"] == pytest.approx([1, 2, 3, 1, 2, 3])
+        assert boxes["odom"] == pytest.approx([5.5, 2, 3.3, 5.5, 2, 3.3])
+        commits = len(mapctl.json("log"))
+        unknown = mapctl.main("import", str(bag), "--tf-frame", "map")
+        assert unknown.code == EXIT_USAGE
+        assert "--tf-frame map: no transform names it" in unknown.err
+        elsewhere = mapctl.main("import", str(LOG), "--tf-frame", "odom")
+        assert elsewhere.code == EXIT_USAGE
+        assert "--tf-frame applies to ROS bags only" in elsewhere.err
+        assert len(mapctl.json("log")) == commits  # neither committed anything
+
     def test_a_cloud_tf_cannot_place_is_kept_and_reported(
         self, mapctl: Mapctl, tmp_path: Path
     ) -> None:

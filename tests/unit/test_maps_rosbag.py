@@ -197,6 +197,29 @@ class TestTfPlacesClouds:
         assert cloud.points == pytest.approx(np.array(want), abs=1e-6)
         assert cloud.frame == "mid-points/odom"
 
+    def test_tf_frame_chooses_where_the_clouds_go(self, tmp_path: Path) -> None:
+        moves = [(1_000_000_000, turned(0.0, 0.0)), (2_000_000_000, turned(2.0, 90.0))]
+        points = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], np.float32)
+        path = tf_bag(tmp_path / "mid", moves, [(1_500_000_000, "lidar", points)])
+        found = by_name(read_bag(path, tf_frame="base_link"))
+        cloud = found["mid-points"]
+        assert isinstance(cloud, PointCloud)
+        # only the lidar's mount (0.5 m ahead, 0.3 m up) lies between the two frames
+        assert cloud.points == pytest.approx(np.array([[1.5, 0, 0.3], [0.5, 0, 1.3]]), abs=1e-6)
+        assert cloud.frame == "mid-points/base_link"
+        assert found["mid-odom"].frame == "mid-odom/odom"  # the trajectory keeps its own
+        as_given = by_name(read_bag(path, tf_frame="lidar"))["mid-points"]
+        assert isinstance(as_given, PointCloud)
+        assert as_given.points == pytest.approx(points)
+        assert as_given.warnings == []
+
+    def test_a_tf_frame_no_transform_names_is_refused(self, tmp_path: Path) -> None:
+        moves = [(1_000_000_000, turned(0.0, 0.0))]
+        points = np.array([[1.0, 0.0, 0.0]], np.float32)
+        path = tf_bag(tmp_path / "mid", moves, [(1_000_000_000, "lidar", points)])
+        with pytest.raises(UsageError, match=r"--tf-frame map: .*frames: base_link, lidar, odom"):
+            read_bag(path, tf_frame="map")
+
     def test_without_a_tf_path_the_points_stay_and_a_warning_says_so(self, tmp_path: Path) -> None:
         points = np.array([[1.0, 2.0, 3.0]], np.float32)
         moves = [(1, turned(0.0, 0.0)), (2, turned(1.0, 0.0))]
