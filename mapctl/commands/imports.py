@@ -73,7 +73,7 @@ def import_map(
     GTSAM Symbol keys), Kimera-Multi CSV set, GTSAM landmark text, PLY or PCD
     cloud, CARMEN laser log (.clf, .clf.bz2), ROS bag (.bag, or a ROS 2 bag's
     folder: one mission per pose, point cloud or occupancy grid topic; clouds
-    placed through /tf in the odometry's frame).
+    placed through /tf in the odometry's frame, or in --tf-frame's).
 
     Each mission is one commit, in new chunks (one per table); a malformed file
     stops with the line it failed on, and nothing is committed.
