@@ -20,9 +20,11 @@ for suspicions ("peer ... is suspect" or "is dead").
 The report (JSON): the items, each command's seconds (and why any failed),
 every status poll, A's and B's final lag, the worst p99 and max A reported,
 the slowest status answer and how many went unanswered (the CLI gives up
-after its timeout), the suspicions, and the machine's load average before
-and after. Nothing is asserted here; tests/multiproc/test_loop_lag.py asserts
-on the same run, and the figures go to docs/benchmarks.md.
+after its timeout), the suspicions, the machine's load average before
+and after, and the share of CPU time its hypervisor stole meanwhile
+(`cpu_steal_percent`, from `/proc/stat`). Nothing is asserted here;
+tests/multiproc/test_loop_lag.py asserts on the same run, and the figures go
+to docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -199,7 +201,7 @@ def measure_stall(
     if root is None:
         with tempfile.TemporaryDirectory(prefix="mapbench-stall-") as scratch:
             return measure_stall(items, load_items, poll, Path(scratch))
-    load_before = os.getloadavg()
+    load_before, cpu_before = os.getloadavg(), _cpu_times()
     a, b = root / "a", root / "b"
     try:
         a, b = _setup(root, items, load_items)
@@ -226,7 +228,26 @@ def measure_stall(
         "slowest_status_s": max(p["answer_s"] for p in polls),
         "suspicions": _suspicions(a) + _suspicions(b),
         "load_average": [round(load_before[0], 2), round(os.getloadavg()[0], 2)],
+        "cpu_steal_percent": _steal_percent(cpu_before, _cpu_times()),
     }
+
+
+def _cpu_times() -> list[int] | None:
+    """The machine's CPU times so far (`/proc/stat`'s first line, in ticks), None
+    where there is no such file."""
+    try:
+        with open("/proc/stat", encoding="ascii") as stat:
+            return [int(v) for v in stat.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def _steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
+    """The share of CPU time the hypervisor gave to other machines between two
+    readings (`steal`, the eighth field): the cores this run could not have."""
+    if before is None or after is None or sum(after) == sum(before):
+        return None
+    return round(100 * (after[7] - before[7]) / (sum(after) - sum(before)), 1)
 
 
 def _lag(status: dict[str, Any] | str) -> dict[str, float] | None:
